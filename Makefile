@@ -1,0 +1,34 @@
+# Quick start: `make train` trains the default config; `make test` runs the suite.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+CONFIG ?= configs/walker_legs.yaml
+
+.PHONY: train test lint bench clean
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install --upgrade pip
+
+$(VENV)/.installed: pyproject.toml | $(BIN)/python
+	$(BIN)/pip install -e .
+	touch $@
+
+$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
+	$(BIN)/pip install -e ".[test]"
+	touch $@
+
+train: $(VENV)/.installed
+	$(BIN)/paramimic train $(CONFIG) --serial
+
+test: $(VENV)/.installed-test
+	$(BIN)/ruff check paramimic services tests benchmarks
+	$(BIN)/python -m pytest tests
+
+bench: $(VENV)/.installed-test
+	$(BIN)/pip install -e ".[test,bench]"
+	$(BIN)/python benchmarks/env_speed.py
+	$(BIN)/python benchmarks/learning.py
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,324 @@
+"""Parametric planar characters built with MjSpec: B = F(B̄, b) ([WL19] §3.1, §5.3).
+
+A base character is a tree of segments. Each segment's body frame sits at its joint; its geom
+extends from there along `direction` for `length`. Children attach at the parent's start or end,
+so joint anchors follow the parent's (scaled) length. Geoms share one density, so mass follows
+volume. Actuators are MuJoCo position servos with damping `kv`, integrated implicitly
+(`implicitfast`): the stable PD controller of [WL19] Eq. 3, with gains tuned once on the base body.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import mujoco
+import numpy as np
+
+DENSITY = 1000.0  # kg/m^3, constant for every shape so that mass follows volume
+TIMESTEP = 1.0 / 600.0  # [WL19] Table 2: 600 Hz simulation
+PLANAR_AXIS = (0.0, -1.0, 0.0)  # positive angle = flexion forward in the sagittal (x-z) plane
+DOWN = (0.0, 0.0, -1.0)
+UP = (0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A hinge with a position servo. `kp` in N·m/rad, `torque` the |τ| limit in N·m."""
+
+    name: str
+    range: tuple[float, float]
+    kp: float
+    torque: float
+    kv_ratio: float = 0.1  # kv = kv_ratio * kp
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One rigid segment. Capsules extend along `direction`; a foot is a box under its joint."""
+
+    name: str
+    parent: str | None
+    length: float
+    width: float  # capsule radius, or half-width of a foot box
+    joint: Joint | None = None
+    kind: Literal["capsule", "foot"] = "capsule"
+    direction: tuple[float, float, float] = DOWN
+    attach: Literal["start", "end"] = "end"
+    thickness: float = 0.05  # foot box height (m)
+
+
+@dataclass(frozen=True)
+class ShapeParam:
+    """A named body parameter b_i: a scale with a default of 1 and the range it is meant for."""
+
+    name: str
+    low: float
+    high: float
+    doc: str
+
+
+@dataclass(frozen=True)
+class CharacterDef:
+    """A base character B̄ and the map from a shape vector b to per-segment scales."""
+
+    name: str
+    segments: tuple[Segment, ...]
+    shape_params: tuple[ShapeParam, ...]
+    scales: Callable[
+        [dict[str, float]], dict[str, tuple[float, float]]
+    ]  # (shape) -> {segment: (length scale, width scale)}
+    legs: tuple[tuple[str, ...], ...]  # segments whose lengths add up to each leg
+    end_effectors: tuple[str, ...]
+    feet: tuple[str, ...]
+
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.shape_params)
+
+    def default_shape(self) -> dict[str, float]:
+        return {p.name: 1.0 for p in self.shape_params}
+
+    @property
+    def joints(self) -> tuple[Joint, ...]:
+        return tuple(s.joint for s in self.segments if s.joint is not None)
+
+
+@dataclass
+class Character:
+    """A compiled character: the model plus the indices the environment needs."""
+
+    definition: CharacterDef
+    shape: dict[str, float]
+    model: mujoco.MjModel
+    qpos_idx: np.ndarray  # qpos addresses of actuated joints
+    qvel_idx: np.ndarray
+    ctrl_low: np.ndarray
+    ctrl_high: np.ndarray
+    torque_limit: np.ndarray
+    ee_site_ids: np.ndarray
+    ee_sensor: slice  # sensordata of end-effector positions in the root frame, [n_ee * 3]
+    tau_sensor: slice  # sensordata of actuator torques [nj]; q, dq, ee, tau are one block
+    up_sensor: slice  # sensordata of the root's z axis in the world
+    com_sensor: slice  # sensordata of the whole-body COM in the world
+    contact_site_ids: np.ndarray
+    root_body_id: int
+    leg_lengths: np.ndarray
+    mass: float
+    hip_height: float  # root (hip) height when standing straight on the ground
+    segment_lengths: dict[str, float] = field(default_factory=dict)
+
+
+def shape_with_defaults(
+    definition: CharacterDef, shape: dict[str, float] | None
+) -> dict[str, float]:
+    """Fill missing shape parameters with 1.0; reject names the character does not have."""
+    full = definition.default_shape()
+    for name, value in (shape or {}).items():
+        if name not in full:
+            raise KeyError(
+                f"character {definition.name!r} has no shape parameter {name!r}; "
+                f"it has {sorted(full)}"
+            )
+        if not np.isfinite(value) or value <= 0:
+            raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
+        full[name] = float(value)
+    return full
+
+
+def _scaled_segments(
+    definition: CharacterDef, shape: dict[str, float]
+) -> dict[str, tuple[float, float]]:
+    scales = definition.scales(shape)
+    return {
+        s.name: (s.length * scales[s.name][0], s.width * scales[s.name][1])
+        for s in definition.segments
+    }
+
+
+def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) -> MjSpecResult:
+    """F(B̄, b): a fresh MjSpec of the character with shape `b` standing on a ground plane."""
+    shape = shape_with_defaults(definition, shape)
+    dims = _scaled_segments(definition, shape)
+    spec = mujoco.MjSpec()
+    spec.modelname = definition.name
+    spec.compiler.degree = False
+    spec.option.timestep = TIMESTEP
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.worldbody.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        friction=[1.0, 0.005, 1e-4],
+        rgba=[0.8, 0.8, 0.8, 1],
+    )
+    spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1])
+
+    legs = [sum(dims[s][0] for s in leg) for leg in definition.legs]
+    foot_drop = max(_foot_thickness(definition, shape, f) for f in definition.feet)
+    hip_height = max(legs) + foot_drop
+    bodies: dict[str, mujoco.MjsBody] = {}
+    for seg in definition.segments:
+        length, width = dims[seg.name]
+        if seg.parent is None:
+            body = spec.worldbody.add_body(name=seg.name, pos=[0, 0, hip_height])
+            body.add_joint(name="rootx", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+            body.add_joint(name="rootz", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+            body.add_joint(name="rooty", type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(PLANAR_AXIS))
+        else:
+            parent = next(s for s in definition.segments if s.name == seg.parent)
+            p_len = dims[parent.name][0]
+            offset = np.zeros(3) if seg.attach == "start" else np.array(parent.direction) * p_len
+            body = bodies[seg.parent].add_body(name=seg.name, pos=offset.tolist())
+        bodies[seg.name] = body
+        if seg.joint is not None:
+            body.add_joint(
+                name=seg.joint.name,
+                type=mujoco.mjtJoint.mjJNT_HINGE,
+                axis=list(PLANAR_AXIS),
+                range=list(seg.joint.range),
+                limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+                armature=0.01,
+            )
+        _add_geom(body, seg, length, width, shape)
+    for seg in definition.segments:
+        j = seg.joint
+        if j is None:
+            continue
+        act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=j.kp, kv=j.kv_ratio * j.kp)
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = list(j.range)
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-j.torque, j.torque]  # torque limits, [L21] §7.4
+    _add_sensors(spec, definition)
+    return MjSpecResult(
+        spec=spec,
+        shape=shape,
+        legs=np.array(legs),
+        hip_height=hip_height,
+        lengths={k: v[0] for k, v in dims.items()},
+    )
+
+
+@dataclass
+class MjSpecResult:
+    spec: mujoco.MjSpec
+    shape: dict[str, float]
+    legs: np.ndarray
+    hip_height: float
+    lengths: dict[str, float]
+
+
+def _add_sensors(spec: mujoco.MjSpec, definition: CharacterDef) -> None:
+    """One contiguous sensordata block the environment reads per step, in this order:
+    joint angles [nj], joint velocities [nj], end-effectors in the root frame [3 n_ee],
+    actuator torques [nj], root z axis [3], whole-body COM [3]."""
+    root = definition.segments[0].name
+    obj = mujoco.mjtObj
+    kinds = mujoco.mjtSensor
+    for j in definition.joints:
+        spec.add_sensor(
+            name=f"q_{j.name}", type=kinds.mjSENS_JOINTPOS, objtype=obj.mjOBJ_JOINT, objname=j.name
+        )
+    for j in definition.joints:
+        spec.add_sensor(
+            name=f"dq_{j.name}", type=kinds.mjSENS_JOINTVEL, objtype=obj.mjOBJ_JOINT, objname=j.name
+        )
+    for e in definition.end_effectors:
+        spec.add_sensor(
+            name=f"ee_{e}",
+            type=kinds.mjSENS_FRAMEPOS,
+            objtype=obj.mjOBJ_SITE,
+            objname=f"{e}_end",
+            reftype=obj.mjOBJ_BODY,
+            refname=root,
+        )
+    for j in definition.joints:
+        spec.add_sensor(
+            name=f"tau_{j.name}",
+            type=kinds.mjSENS_ACTUATORFRC,
+            objtype=obj.mjOBJ_ACTUATOR,
+            objname=j.name,
+        )
+    spec.add_sensor(name="up", type=kinds.mjSENS_FRAMEZAXIS, objtype=obj.mjOBJ_BODY, objname=root)
+    spec.add_sensor(name="com", type=kinds.mjSENS_SUBTREECOM, objtype=obj.mjOBJ_BODY, objname=root)
+
+
+def _foot_thickness(definition: CharacterDef, shape: dict[str, float], foot: str) -> float:
+    seg = next(s for s in definition.segments if s.name == foot)
+    return seg.thickness * definition.scales(shape)[foot][1]
+
+
+def _add_geom(
+    body: mujoco.MjsBody, seg: Segment, length: float, width: float, shape: dict[str, float]
+) -> None:
+    # Body geoms touch the floor but not each other (contype 1, conaffinity 0), as in gym envs.
+    common = dict(density=DENSITY, contype=1, conaffinity=0, rgba=[0.45, 0.6, 0.85, 1])
+    if seg.kind == "capsule":
+        end = (np.array(seg.direction) * length).tolist()
+        body.add_geom(
+            name=seg.name,
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[0, 0, 0, *end],
+            size=[width, 0, 0],
+            **common,
+        )
+        body.add_site(name=f"{seg.name}_end", pos=end)
+        return
+    # Foot: a box from 25 % of its length behind the ankle to 75 % in front, hanging below it.
+    thickness = seg.thickness * (width / seg.width)
+    x0, x1 = -0.25 * length, 0.75 * length
+    center = [(x0 + x1) / 2, 0, -thickness / 2]
+    body.add_geom(
+        name=seg.name,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[length / 2, width, thickness / 2],
+        pos=center,
+        **common,
+    )
+    body.add_site(name=f"{seg.name}_end", pos=[x1, 0, -thickness / 2])
+    for i, (x, y) in enumerate([(x0, -width), (x0, width), (x1, -width), (x1, width)]):
+        body.add_site(name=f"{seg.name}_c{i}", pos=[x, y, -thickness])  # [WL19] Eq. 1 points
+
+
+def compile_character(definition: CharacterDef, shape: dict[str, float] | None = None) -> Character:
+    """Build and compile; returns the model with the indices the environment uses."""
+    built = build_spec(definition, shape)
+    model = built.spec.compile()
+    joints = definition.joints
+    jids = [model.joint(j.name).id for j in joints]
+    feet_sites = [f"{f}_c{i}" for f in definition.feet for i in range(4)]
+    root = model.body(definition.segments[0].name).id
+    return Character(
+        definition=definition,
+        shape=built.shape,
+        model=model,
+        qpos_idx=np.array([model.jnt_qposadr[j] for j in jids]),
+        qvel_idx=np.array([model.jnt_dofadr[j] for j in jids]),
+        ctrl_low=np.array([j.range[0] for j in joints]),
+        ctrl_high=np.array([j.range[1] for j in joints]),
+        torque_limit=np.array([j.torque for j in joints]),
+        ee_site_ids=np.array([model.site(f"{e}_end").id for e in definition.end_effectors]),
+        contact_site_ids=np.array([model.site(s).id for s in feet_sites]),
+        ee_sensor=slice(
+            model.sensor(f"ee_{definition.end_effectors[0]}").adr[0],
+            model.sensor(f"ee_{definition.end_effectors[-1]}").adr[0] + 3,
+        ),
+        tau_sensor=slice(
+            model.sensor(f"tau_{joints[0].name}").adr[0],
+            model.sensor(f"tau_{joints[-1].name}").adr[0] + 1,
+        ),
+        up_sensor=_sensor_slice(model, "up"),
+        com_sensor=_sensor_slice(model, "com"),
+        root_body_id=root,
+        leg_lengths=built.legs,
+        mass=float(model.body_subtreemass[root]),
+        hip_height=built.hip_height,
+        segment_lengths=built.lengths,
+    )
+
+
+def _sensor_slice(model: mujoco.MjModel, name: str) -> slice:
+    s = model.sensor(name)
+    return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))

@@ -1,0 +1,100 @@
+"""The planar characters: `walker` (torso, two thighs, shins, feet) and `hopper` (one leg).
+
+Root: slide x, slide z and pitch, as in gymnasium's planar MuJoCo environments. Gains and
+torque limits were tuned once on the base bodies and stay fixed for every shape ([WL19] §3.1).
+"""
+
+from __future__ import annotations
+
+from paramimic.characters.body import UP, CharacterDef, Joint, Segment, ShapeParam
+
+_GLOBAL = ShapeParam("global_scale", 0.5, 1.5, "height: every length and width")
+_SPLIT = ShapeParam(
+    "thigh_shin_split", 0.8, 1.2, "thigh length x s, shin takes the rest of the leg"
+)
+_TORSO = ShapeParam("torso_length", 0.7, 1.3, "torso length")
+_THICK = ShapeParam("limb_thickness", 0.7, 1.3, "radius of thighs and shins, width of feet")
+
+
+def _leg(side: str, hip: tuple[float, float] = (-0.8, 1.8)) -> tuple[Segment, ...]:
+    sfx = f"_{side}" if side else ""
+    return (
+        Segment(
+            f"thigh{sfx}",
+            "torso",
+            0.45,
+            0.05,
+            Joint(f"hip{sfx}", hip, 150.0, 100.0),
+            attach="start",
+        ),
+        Segment(
+            f"shin{sfx}", f"thigh{sfx}", 0.45, 0.04, Joint(f"knee{sfx}", (-2.4, 0.0), 150.0, 100.0)
+        ),
+        Segment(
+            f"foot{sfx}",
+            f"shin{sfx}",
+            0.22,
+            0.05,
+            Joint(f"ankle{sfx}", (-0.8, 0.8), 60.0, 40.0),
+            kind="foot",
+        ),
+    )
+
+
+def _leg_scales(shape: dict[str, float], sfx: str, leg: float) -> dict[str, tuple[float, float]]:
+    g, s, w = shape["global_scale"], shape["thigh_shin_split"], shape["limb_thickness"]
+    thigh, shin = 0.45, 0.45
+    shin_scale = (thigh + shin - thigh * s) / shin  # the leg keeps its length under the split
+    return {
+        f"thigh{sfx}": (g * leg * s, g * w),
+        f"shin{sfx}": (g * leg * shin_scale, g * w),
+        f"foot{sfx}": (g, g * w),
+    }
+
+
+def _walker_scales(shape: dict[str, float]) -> dict[str, tuple[float, float]]:
+    g = shape["global_scale"]
+    return {
+        "torso": (g * shape["torso_length"], g),
+        **_leg_scales(shape, "_r", shape["right_leg_length"]),
+        **_leg_scales(shape, "_l", shape["left_leg_length"]),
+    }
+
+
+def _hopper_scales(shape: dict[str, float]) -> dict[str, tuple[float, float]]:
+    g = shape["global_scale"]
+    return {"torso": (g * shape["torso_length"], g), **_leg_scales(shape, "", shape["leg_length"])}
+
+
+WALKER = CharacterDef(
+    name="walker",
+    segments=(Segment("torso", None, 0.5, 0.06, direction=UP), *_leg("r"), *_leg("l")),
+    shape_params=(
+        _GLOBAL,
+        ShapeParam("left_leg_length", 0.5, 1.5, "left thigh and shin length"),
+        ShapeParam("right_leg_length", 0.5, 1.5, "right thigh and shin length"),
+        _SPLIT,
+        _TORSO,
+        _THICK,
+    ),
+    scales=_walker_scales,
+    legs=(("thigh_r", "shin_r"), ("thigh_l", "shin_l")),
+    end_effectors=("foot_r", "foot_l", "torso"),
+    feet=("foot_r", "foot_l"),
+)
+
+HOPPER = CharacterDef(
+    name="hopper",
+    segments=(Segment("torso", None, 0.4, 0.05, direction=UP), *_leg("")),
+    shape_params=(
+        _GLOBAL,
+        ShapeParam("leg_length", 0.5, 1.5, "thigh and shin length"),
+        _SPLIT,
+        _TORSO,
+        _THICK,
+    ),
+    scales=_hopper_scales,
+    legs=(("thigh", "shin"),),
+    end_effectors=("foot", "torso"),
+    feet=("foot",),
+)

@@ -1,0 +1,209 @@
+"""Pydantic models of a whole experiment, validated before anything starts.
+
+Sections: `character`, `task`, `env`, `ppo`, `curriculum`, `actors`, `train`. Every field is
+documented once, here; numbers from the papers name their source.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+
+# Task goals understood by ParamEnv besides the character's shape parameters.
+TASK_GOALS = {"target_velocity": "target average COM speed along +x (m/s)"}
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class RewardConfig(Section):
+    """[WL19] Eq. 4-7 with Table 3 (biped lower body) weights and the common sensitivities."""
+
+    w_pose: float = Field(5.0, ge=0, description="w1, joint angle imitation")
+    w_velocity: float = Field(2.0, ge=0, description="w2, joint velocity imitation")
+    w_end_effector: float = Field(2.0, ge=0, description="w3, per end-effector position imitation")
+    w_com_velocity: float = Field(1.0, ge=0, description="w4, average COM velocity vs target")
+    w_direction: float = Field(1.0, ge=0, description="w5, facing direction vs target direction")
+    w_torque: float = Field(1.0, ge=0, description="w6, joint torque regularizer")
+    sigma_pose: PositiveFloat = 0.02  # σ1
+    sigma_velocity: PositiveFloat = 0.5  # σ2
+    sigma_end_effector: PositiveFloat = 0.2  # σ3
+    sigma_com_velocity: PositiveFloat = 0.2  # σ4
+    sigma_direction: PositiveFloat = 0.05  # σ5
+    sigma_torque: PositiveFloat = 0.1  # σ6
+
+
+class EnvConfig(Section):
+    """Simulation, observation, reward and termination of ParamEnv."""
+
+    frame_skip: int = Field(
+        20, ge=1, description="physics steps per control step: 600 Hz / 30 Hz ([WL19] Table 2)"
+    )
+    max_episode_seconds: PositiveFloat = Field(30.0, description="time limit ([WL19] Table 2)")
+    action_scale: PositiveFloat = Field(0.5, description="rad of PD target offset per unit action")
+    imitation: bool = Field(True, description="follow the character's procedural reference motion")
+    target_velocity: float = Field(1.0, description="target speed when the task space has none")
+    com_velocity_window: PositiveFloat = Field(
+        2.0, description="seconds over which the COM velocity is averaged ([WL19] Eq. 6)"
+    )
+    fall_height_ratio: float = Field(
+        0.55, gt=0, lt=1, description="fall when the hip is below this share of its standing height"
+    )
+    max_pitch: PositiveFloat = Field(1.0, description="fall when the torso tilts more (rad)")
+    init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
+    reward: RewardConfig = RewardConfig()
+
+
+class PPOConfig(Section):
+    """PPO ([WL19] §3.2, Table 2; [L21] §4.3, §7)."""
+
+    num_steps: int = Field(4096, ge=64, description="T, transitions per policy update")
+    num_epochs: int = Field(10, ge=1, description="N, passes over the batch per update")
+    minibatch_size: int = Field(512, ge=8, description="n, transitions per gradient step")
+    policy_lr: PositiveFloat = Field(2e-4, description="policy learning rate ([L21] §7)")
+    value_lr: PositiveFloat = Field(1e-3, description="value learning rate ([L21] §7)")
+    gamma: float = Field(0.95, gt=0, lt=1, description="discount γ ([WL19] Table 2)")
+    gae_lambda: float = Field(0.95, ge=0, le=1, description="GAE λ ([WL19] Table 2)")
+    clip_coef: PositiveFloat = Field(0.2, description="clip ε ([WL19] Table 2)")
+    ent_coef: float = Field(0.0, ge=0, description="entropy bonus")
+    vf_coef: PositiveFloat = Field(0.5, description="value loss weight")
+    max_grad_norm: PositiveFloat = Field(0.5, description="gradient clipping")
+    hidden_sizes: tuple[int, ...] = Field(
+        (128, 128, 128), description="3 layers of 128 ([WL19] §5)"
+    )
+    init_log_std: float = Field(-1.0, description="initial log std of the Gaussian policy")
+    obs_clip: PositiveFloat = Field(10.0, description="clip of normalized observations")
+
+    @field_validator("hidden_sizes")
+    @classmethod
+    def _positive_layers(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if not v or any(h <= 0 for h in v):
+            raise ValueError("hidden_sizes must be a non-empty list of positive ints")
+        return v
+
+
+class CurriculumConfig(Section):
+    """Adaptive sampling of task parameters ([WL19] §4.2, Alg. 1, Table 2)."""
+
+    k: float = Field(10.0, ge=0, description="uniformity k of exp(-k(V̄-μ)/μ); 0 = uniform")
+    n_mcmc: int = Field(1000, ge=1, description="N_MCMC, samples per buffer refill")
+    p_mcmc: int = Field(20, ge=1, description="P_MCMC, iterations between refills")
+    chains: int = Field(16, ge=1, description="Metropolis-Hastings chains")
+    burn_in: int = Field(20, ge=0, description="steps each chain takes before it records")
+    marginal_lr: PositiveFloat = Field(1e-3, description="α_V̄ ([WL19] Table 2)")
+    mu_lr: PositiveFloat = Field(1e-3, description="α_μ ([WL19] Table 2)")
+    marginal_hidden: tuple[int, ...] = Field((64, 64), description="V̄ MLP layers")
+    marginal_batch: int = Field(128, ge=1, description="minibatch of (a, v) pairs ([L21] §7)")
+    display_dims: tuple[str, ...] | None = Field(
+        None, description="two task dims for grids (default: the first two free)"
+    )
+
+
+class ActorsConfig(Section):
+    """Rollout workers."""
+
+    num_envs: int = Field(16, ge=1, description="M, environments stepped together per worker")
+
+
+class TrainConfig(Section):
+    total_steps: int = Field(2_000_000, ge=1, description="environment steps to train for")
+    seed: int = 0
+    checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
+    run_dir: Path | None = Field(None, description="default: runs/<config name>")
+    torch_threads: int = Field(1, ge=1, description="torch intra-op threads in the learner")
+
+
+class ExperimentConfig(Section):
+    name: str = "experiment"
+    character: str = "walker"
+    task: dict[str, tuple[float, float]] = Field(
+        default_factory=dict, description="the task space A: name -> [min, max]"
+    )
+    env: EnvConfig = EnvConfig()
+    ppo: PPOConfig = PPOConfig()
+    curriculum: CurriculumConfig = CurriculumConfig()
+    actors: ActorsConfig = ActorsConfig()
+    train: TrainConfig = TrainConfig()
+
+    @field_validator("character")
+    @classmethod
+    def _known_character(cls, v: str) -> str:
+        from paramimic.characters import CHARACTERS
+
+        if v not in CHARACTERS:
+            raise ValueError(f"unknown character {v!r}; known: {sorted(CHARACTERS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _valid_task(self) -> ExperimentConfig:
+        from paramimic.characters import CHARACTERS
+
+        allowed = set(CHARACTERS[self.character].param_names()) | set(TASK_GOALS)
+        for name, (lo, hi) in self.task.items():
+            if name not in allowed:
+                raise ValueError(
+                    f"task.{name}: not a parameter of {self.character!r}; "
+                    f"allowed: {sorted(allowed)}"
+                )
+            if lo > hi:
+                raise ValueError(f"task.{name}: min {lo} > max {hi}")
+            if name != "target_velocity" and lo <= 0:
+                raise ValueError(f"task.{name}: body scales must be positive, got min {lo}")
+        dims = self.curriculum.display_dims
+        if dims is not None and (len(dims) != 2 or any(d not in self.task for d in dims)):
+            raise ValueError(
+                f"curriculum.display_dims must name two task parameters, got {list(dims)}"
+            )
+        if self.ppo.minibatch_size > self.ppo.num_steps:
+            raise ValueError("ppo.minibatch_size must not exceed ppo.num_steps")
+        return self
+
+    def grid_dims(self) -> tuple[str, str] | None:
+        """The two task dimensions shown in grids and heatmaps."""
+        if self.curriculum.display_dims is not None:
+            return tuple(self.curriculum.display_dims)  # type: ignore[return-value]
+        free = [n for n, (lo, hi) in self.task.items() if hi > lo]
+        return (free[0], free[1]) if len(free) >= 2 else None
+
+    def resolved_run_dir(self) -> Path:
+        return self.train.run_dir or Path("runs") / self.name
+
+
+class ConfigError(ValueError):
+    """A config that cannot run; the message names the field and the reason."""
+
+
+def format_validation_error(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(config)"
+        lines.append(f"{loc}: {e['msg']}")
+    return "; ".join(lines)
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> ExperimentConfig:
+    """Load and validate a YAML experiment; raise ConfigError naming the field on any problem."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"{path}: cannot read config: {e}") from e
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: top level must be a mapping")
+    raw.setdefault("name", path.stem)
+    for dotted, value in (overrides or {}).items():
+        node = raw
+        *parents, leaf = dotted.split(".")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    try:
+        return ExperimentConfig.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(f"{path}: {format_validation_error(e)}") from e

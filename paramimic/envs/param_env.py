@@ -1,0 +1,383 @@
+"""ParamEnv: one gymnasium environment for a family of bodies and tasks.
+
+Each episode draws task parameters a from the task space (or takes `options={"task": a}`),
+builds the body F(B̄, b) for the shape part of a, and imitates the character's reference motion
+while meeting the task goals. Observation, action and reward follow [WL19] §3.2:
+- observation: a, joint positions and velocities, root height, up vector and velocity,
+  end-effectors in the root frame, target and average COM velocity, and with a reference motion
+  the phase (sin, cos) and the next reference pose;
+- action: an offset added to the reference pose, the PD target of the stable PD servos;
+- reward: Eq. 4-7, every term a bell, scaled by 1/Σw into (0, 1].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from functools import lru_cache
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from paramimic.characters import Character, compile_character, get_character
+from paramimic.config import TASK_GOALS, EnvConfig
+from paramimic.curriculum.task_space import TaskSpace
+from paramimic.motion import REFERENCE_MOTIONS
+
+REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
+SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+# MuJoCo's warnings for a bad qpos, qvel or qacc (it resets the state when one fires)
+INSTABILITY = slice(
+    int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQACC) + 1
+)
+MAX_QVEL_SQ = 1e6  # ‖qvel‖² above this (or NaN) is treated as a diverged simulation
+
+
+@lru_cache(maxsize=32)
+def _compiled(character: str, shape: tuple[tuple[str, float], ...]) -> Character:
+    return compile_character(get_character(character), dict(shape))
+
+
+class ParamEnv(gym.Env):
+    metadata = {"render_modes": [], "render_fps": 30}
+
+    def __init__(
+        self,
+        character: str = "walker",
+        task: Mapping[str, tuple[float, float]] | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+    ) -> None:
+        self.definition = get_character(character)
+        self.config = (
+            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
+        )
+        task = dict(task or {})
+        allowed = set(self.definition.param_names()) | set(TASK_GOALS)
+        unknown = set(task) - allowed
+        if unknown:
+            raise ValueError(
+                f"unknown task parameters {sorted(unknown)} for {character!r}; "
+                f"allowed: {sorted(allowed)}"
+            )
+        self.task_space = TaskSpace.from_ranges(task)
+        self._shape_idx = [
+            (n, i)
+            for i, n in enumerate(self.task_space.names)
+            if n in self.definition.param_names()
+        ]
+        self._velocity_idx = (
+            self.task_space.names.index("target_velocity")
+            if "target_velocity" in self.task_space.names
+            else None
+        )
+        self.motion = REFERENCE_MOTIONS[character] if self.config.imitation else None
+        joint_names = tuple(j.name for j in self.definition.joints)
+        if self.motion is not None and self.motion.joints != joint_names:
+            raise ValueError(f"reference motion joints {self.motion.joints} != {joint_names}")
+        self.frame_skip = self.config.frame_skip
+        self._action_scale = self.config.action_scale
+        self._max_pitch = self.config.max_pitch
+        self.character: Character
+        self.model: mujoco.MjModel
+        self.data: mujoco.MjData
+        self._load(self.task_space.center)
+        self.dt = self.model.opt.timestep * self.frame_skip
+        self._max_steps = int(round(self.config.max_episode_seconds / self.dt))
+        self._window = max(1, int(round(self.config.com_velocity_window / self.dt)))
+        self._task = self.task_space.center.copy()
+        nu = len(joint_names)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (nu,), np.float32)
+        self._init_state(np.random.default_rng(0), phase=0.0)
+        self._last_obs = None
+        obs = self._observe()
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, obs.shape, np.float32)
+
+    # --- body ---------------------------------------------------------------------------------
+
+    def _load(self, task: np.ndarray) -> None:
+        shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
+        c = _compiled(self.definition.name, shape)
+        if getattr(self, "character", None) is c:
+            return
+        self.character = c
+        self.model = c.model
+        # Sensors are evaluated once per control step (`_sense`), not in each of the physics steps.
+        c.model.opt.disableflags |= SENSOR_OFF
+        self._flags_sensing = c.model.opt.disableflags & ~SENSOR_OFF
+        self._flags_stepping = c.model.opt.disableflags
+        self._opt = c.model.opt
+        self.data = mujoco.MjData(c.model)
+        self._qs = _as_slice(c.qpos_idx)
+        self._vs = _as_slice(c.qvel_idx)
+        self._ctrl_low, self._ctrl_high = c.ctrl_low, c.ctrl_high
+        self._torque_scale = 1.0 / c.torque_limit
+        self._fall_height = self.config.fall_height_ratio * c.hip_height
+        n_ee = len(c.ee_site_ids)
+        # sensordata entries the observation reads: joints, end-effector x and z, up vector x, z
+        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, [0, 2]].ravel()
+        self._reference = self._tabulate_reference() if self.motion is not None else None
+        rc = self.config.reward
+        nj = len(c.qpos_idx)
+        # Bells of Eq. 5-7 in sensordata order: pose, joint velocity, each end-effector, torque,
+        # then COM velocity and direction. Weights w1..w6 (Table 3) and 1/(σ dim(x)).
+        w = np.array(
+            [
+                rc.w_pose,
+                rc.w_velocity,
+                *[rc.w_end_effector] * n_ee,
+                rc.w_torque,
+                rc.w_com_velocity,
+                rc.w_direction,
+            ]
+        )
+        if self.motion is None:
+            w[: 2 + n_ee] = 0.0
+        sigma = np.array(
+            [
+                rc.sigma_pose,
+                rc.sigma_velocity,
+                *[rc.sigma_end_effector] * n_ee,
+                rc.sigma_torque,
+                rc.sigma_com_velocity,
+                rc.sigma_direction,
+            ]
+        )
+        dims = np.array([nj, nj, *[3] * n_ee, nj, 2, 2], dtype=np.float64)
+        w = w / w.sum()  # every step's reward lies in (0, 1]
+        self._weights = w
+        self._neg_inv_sigma_dim = -1.0 / (sigma * dims)
+        self._err = np.zeros(len(w))
+        self._nj = nj
+        self._block = slice(0, c.tau_sensor.stop)  # q, dq, ee, tau: one sensordata block
+        # squared block entries -> ‖x‖² per bell; torques are scaled by their limits first
+        groups = [0] * nj + [1] * nj + [2 + i for i in range(n_ee) for _ in range(3)]
+        groups += [2 + n_ee] * nj
+        self._n_block_bells = len(w) - 2
+        sum_matrix = np.zeros((len(groups), self._n_block_bells))
+        sum_matrix[np.arange(len(groups)), groups] = 1.0
+        self._sum_matrix = sum_matrix
+        self._block_scale = np.concatenate([np.ones(2 * nj + 3 * n_ee), 1.0 / c.torque_limit])
+        self._zero_reference = np.zeros(len(groups))
+        # bells -> reported terms: pose, velocity, Σ end-effector, COM velocity, direction, torque
+        # and the task reward (the w4, w5 share of the normalized total)
+        t = 2 + n_ee
+        tm = np.zeros((len(w), len(REWARD_TERMS)))
+        tm[0, 0] = tm[1, 1] = 1.0
+        tm[2:t, 2] = 1.0
+        tm[t + 1, 3] = tm[t + 2, 4] = tm[t, 5] = 1.0
+        tm[t + 1 : t + 3, 6] = w[t + 1 : t + 3]
+        self._term_matrix = tm
+        self._obs_sensors = np.concatenate(
+            [np.arange(2 * nj), ee, [c.up_sensor.start, c.up_sensor.start + 2]]
+        )
+
+    def _tabulate_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
+
+        Rows k = 0..K sample φ = k/K; returns (table [K+1, P], row differences [K, P]) so that
+        a lookup is one multiply-add.
+        """
+        c, d, m = self.character, self.data, self.model
+        rows = []
+        for k in range(REFERENCE_SAMPLES + 1):
+            phi = k / REFERENCE_SAMPLES
+            mujoco.mj_resetData(m, d)
+            d.qpos[c.qpos_idx] = self.motion.pose(phi)
+            mujoco.mj_fwdPosition(m, d)
+            self._sense()
+            rows.append(
+                np.concatenate(
+                    [
+                        self.motion.pose(phi),
+                        self.motion.velocity(phi),
+                        d.sensordata[c.ee_sensor],
+                        np.zeros(len(c.qpos_idx)),
+                    ]
+                )
+            )
+        table = np.array(rows)
+        return table, np.diff(table, axis=0)
+
+    def _reference_at(self, phase: float) -> np.ndarray:
+        """Linear interpolation in the tabulated reference: [pose, joint velocity, ee]."""
+        x = (phase % 1.0) * REFERENCE_SAMPLES
+        k = int(x)
+        table, slope = self._reference
+        return table[k] + (x - k) * slope[k]
+
+    # --- episode ------------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        task = (options or {}).get("task")
+        if task is None:
+            a = self.task_space.sample(self.np_random, 1)[0]
+        else:
+            a = (
+                self.task_space.from_dict(task)
+                if isinstance(task, Mapping)
+                else np.asarray(task, dtype=np.float64).reshape(-1)
+            )
+            if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
+                raise ValueError(
+                    f"task {a} is not inside the task space {self.task_space.ranges()}"
+                )
+        self._task = a
+        self._load(a)
+        self._init_state(self.np_random, phase=float(self.np_random.random()))
+        obs = self._observe()
+        self._last_obs = obs
+        return obs, {"task": self._task.copy()}
+
+    def _init_state(self, rng: np.random.Generator, phase: float) -> None:
+        """Reference state at a random phase with noise ([WL19] Alg. 1 l.8), feet on the floor."""
+        c, d, m = self.character, self.data, self.model
+        mujoco.mj_resetData(m, d)
+        self._target_v = (
+            float(self._task[self._velocity_idx])
+            if self._velocity_idx is not None
+            else self.config.target_velocity
+        )
+        self._target_sign = 1.0 if self._target_v >= 0 else -1.0
+        self._phase = phase
+        self._dphase = self.dt / self.motion.period if self.motion is not None else 0.0
+        noise = self.config.init_noise
+        nj = len(c.qpos_idx)
+        if self.motion is not None:
+            d.qpos[c.qpos_idx] = self.motion.pose(phase) + noise * rng.standard_normal(nj)
+            d.qvel[c.qvel_idx] = self.motion.velocity(phase) + noise * rng.standard_normal(nj)
+        d.qpos[c.qpos_idx] = np.clip(d.qpos[c.qpos_idx], c.ctrl_low, c.ctrl_high)
+        d.qvel[0] = self._target_v  # root x velocity
+        mujoco.mj_kinematics(m, d)
+        lowest = d.site_xpos[c.contact_site_ids, 2].min()
+        d.qpos[1] -= lowest - 1e-3  # rootz: the lowest foot point touches the ground
+        d.ctrl[:] = d.qpos[c.qpos_idx]
+        mujoco.mj_forward(m, d)
+        self._sense()
+        self._steps = 0
+        self._unstable = int(d.warning.number[INSTABILITY].sum())
+        self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
+        self._com_vel = (0.0, 0.0, 0.0)
+        self._next_reference = None
+
+    # --- step ---------------------------------------------------------------------------------
+
+    def step(self, action: np.ndarray):
+        c, d = self.character, self.data
+        self._phase += self._dphase
+        # PD target = reference pose + offset; MuJoCo clamps ctrl to the joint range.
+        a = np.minimum(np.maximum(action, -1.0), 1.0) * self._action_scale
+        ref = None
+        if self._reference is not None:
+            ref = self._next_reference  # looked up by the previous observation at this phase
+            a += ref[: self._nj]
+        d.ctrl[:] = a
+        mujoco.mj_step(self.model, d, nstep=self.frame_skip)
+        self._sense()
+        self._steps += 1
+
+        qvel = d.qvel
+        if not qvel @ qvel < MAX_QVEL_SQ or d.warning.number[INSTABILITY].sum() > self._unstable:
+            # A diverging simulation ends the episode, never the run: NaN or exploding velocity,
+            # or MuJoCo's own reset of the state on a bad qpos, qvel or qacc.
+            info = {
+                "task": self._task.copy(),
+                "fell": False,
+                "diverged": True,
+                "dphi": 1.0,
+                "reward_spike": 0.0,
+                "reward_terms": dict.fromkeys(REWARD_TERMS, 0.0),
+            }
+            return self._last_obs, 0.0, True, False, info
+
+        # [WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` seconds.
+        cx, cy, cz = com = d.sensordata[c.com_sensor].tolist()
+        ring = self._com
+        elapsed = self._steps if self._steps < self._window else self._window
+        ox, oy, oz = ring[(self._steps - elapsed) % len(ring)]
+        inv = 1.0 / (elapsed * self.dt)
+        self._com_vel = ((cx - ox) * inv, (cy - oy) * inv, (cz - oz) * inv)
+        ring[self._steps % len(ring)] = com
+
+        reward, terms = self._reward(ref)
+        obs = self._observe()
+        self._last_obs = obs
+        qpos = d.qpos
+        fell = bool(qpos[1] + c.hip_height < self._fall_height or abs(qpos[2]) > self._max_pitch)
+        truncated = self._steps >= self._max_steps and not fell
+        info = {
+            "task": self._task.copy(),
+            "fell": fell,
+            "diverged": False,
+            "dphi": 1.0,
+            "reward_spike": 0.0,
+            "reward_terms": terms,
+        }
+        return obs, reward, fell, truncated, info
+
+    def _sense(self) -> None:
+        """Evaluate the sensor block for the current state of the control step."""
+        m, d, opt = self.model, self.data, self._opt
+        opt.disableflags = self._flags_sensing
+        mujoco.mj_sensorPos(m, d)
+        mujoco.mj_sensorVel(m, d)
+        mujoco.mj_sensorAcc(m, d)
+        opt.disableflags = self._flags_stepping
+
+    def _reward(self, ref: np.ndarray | None) -> tuple[float, dict[str, float]]:
+        """[WL19] Eq. 4-7: R = R_imit + R_task + R_reg, ‖x‖²_D = ‖x‖²/dim(x), each term a bell."""
+        d, err = self.data, self._err
+        if ref is None:
+            ref = self._zero_reference
+        diff = (d.sensordata[self._block] - ref) * self._block_scale
+        n = self._n_block_bells
+        err[:n] = (diff * diff) @ self._sum_matrix  # Eq. 5 pose, velocity, ee; Eq. 7 τ
+        vx, vy, _ = self._com_vel
+        vx -= self._target_v
+        err[n] = vx * vx + vy * vy  # Eq. 6: average COM velocity vs target (horizontal)
+        fx = d.xmat[self.character.root_body_id, 0]  # root forward axis (planar: x component)
+        err[n + 1] = 0.0 if fx * self._target_sign > 0 else 2.0  # Eq. 6: facing direction
+        bells = np.exp(err * self._neg_inv_sigma_dim)
+        reward = float(bells @ self._weights)
+        return reward, dict(zip(REWARD_TERMS, (bells @ self._term_matrix).tolist(), strict=True))
+
+    def _observe(self) -> np.ndarray:
+        c, d = self.character, self.data
+        phase = self._phase
+        vx, _, vz = self._com_vel
+        scalars = (d.qpos[1] + c.hip_height, self._target_v, vx, vz)
+        parts = [
+            self._task,
+            d.sensordata[self._obs_sensors],  # joint q, dq; end-effectors (x, z) in the root
+            # frame; up vector (x, z)
+            d.qvel[0:3],  # root velocity: x, z, pitch rate
+            scalars,  # root height, target speed, average COM velocity (x, z)
+        ]
+        if self._reference is not None:
+            x = 2.0 * math.pi * phase
+            parts.append((math.sin(x), math.cos(x)))
+            self._next_reference = self._reference_at(phase + self._dphase)
+            parts.append(self._next_reference[: self._nj])  # next reference pose
+        return np.concatenate(parts, dtype=np.float32)
+
+    # --- accessors ----------------------------------------------------------------------------
+
+    @property
+    def task(self) -> np.ndarray:
+        return self._task.copy()
+
+    @property
+    def sim_time(self) -> float:
+        return self._steps * self.dt
+
+
+def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
+    """A basic slice when the indices are contiguous (a view, no copy), else the index array."""
+    if len(idx) and np.all(np.diff(idx) == 1):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
+REWARD_TERMS = ("pose", "velocity", "end_effector", "com_velocity", "direction", "torque", "task")

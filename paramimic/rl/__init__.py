@@ -1,0 +1,1 @@
+"""RL core: networks, running stats, variable-Δt GAE, PPO, the rollout loop."""

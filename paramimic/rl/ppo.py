@@ -1,0 +1,184 @@
+"""The clipped PPO objective and the learner that optimizes it ([WL19] §3.2, [L21] §4.3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from paramimic.config import PPOConfig
+from paramimic.rl.gae import compute_gae
+from paramimic.rl.networks import ActorCritic, RunningMeanStd
+from paramimic.rl.rollout import Fragment
+
+
+def ppo_loss(
+    new_logp: torch.Tensor,
+    old_logp: torch.Tensor,
+    advantages: torch.Tensor,
+    values: torch.Tensor,
+    returns: torch.Tensor,
+    entropy: torch.Tensor,
+    clip_coef: float,
+    vf_coef: float,
+    ent_coef: float,
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Clipped surrogate + value regression − entropy bonus, all over a minibatch [N].
+
+    L = −mean(min(ρA, clip(ρ, 1−ε, 1+ε)A)) + c_v · ½ mean((V − R)²) − c_e · H,  ρ = π/π_old.
+    `old_logp` is the log-prob under the policy that collected the data, so the same ratio
+    also corrects data sampled one policy version behind.
+    """
+    ratio = torch.exp(new_logp - old_logp)
+    surrogate = torch.minimum(
+        ratio * advantages, torch.clamp(ratio, 1 - clip_coef, 1 + clip_coef) * advantages
+    )
+    policy_loss = -surrogate.mean()
+    value_loss = 0.5 * (values - returns).pow(2).mean()
+    loss = policy_loss + vf_coef * value_loss - ent_coef * entropy
+    with torch.no_grad():
+        log_ratio = new_logp - old_logp
+        stats = {
+            "policy_loss": float(policy_loss),
+            "value_loss": float(value_loss),
+            "entropy": float(entropy),
+            "approx_kl": float(((ratio - 1) - log_ratio).mean()),
+            "clip_fraction": float(((ratio - 1).abs() > clip_coef).float().mean()),
+        }
+    return loss, stats
+
+
+@dataclass
+class Batch:
+    """Flattened training data of one iteration: N transitions."""
+
+    obs: np.ndarray  # [N, obs_dim] raw observations
+    actions: np.ndarray  # [N, A]
+    logp: np.ndarray  # [N]
+    values: np.ndarray  # [N]
+    advantages: np.ndarray  # [N]
+    returns: np.ndarray  # [N]
+    tasks: np.ndarray  # [N, d] task parameters of each transition (for V̄)
+
+
+class PPOLearner:
+    """Networks, optimizers and the observation normalizer; `update` runs one PPO step."""
+
+    def __init__(self, obs_dim: int, act_dim: int, cfg: PPOConfig, seed: int = 0) -> None:
+        self.cfg = cfg
+        torch.manual_seed(seed)
+        self.policy = ActorCritic(
+            obs_dim, act_dim, cfg.hidden_sizes, cfg.init_log_std, cfg.obs_clip
+        )
+        self.policy_opt = torch.optim.Adam(self.policy.policy_parameters(), lr=cfg.policy_lr)
+        self.value_opt = torch.optim.Adam(self.policy.value_parameters(), lr=cfg.value_lr)
+        self.normalizer = RunningMeanStd(obs_dim)
+        self.rng = np.random.default_rng(seed)
+        self.version = 0  # policy version, +1 per update
+
+    def weights(self) -> dict[str, torch.Tensor]:
+        """Everything an actor needs to act: network weights and normalizer buffers."""
+        return {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+
+    def build_batch(self, fragments: list[Fragment]) -> Batch:
+        """Variable time-step GAE per fragment ([L21] Eq. 9), then flatten."""
+        parts = []
+        for f in fragments:
+            adv, ret = compute_gae(
+                f.rewards,
+                f.spike_rewards,
+                f.values,
+                f.next_values,
+                f.terminated,
+                f.truncated,
+                f.dphi,
+                self.cfg.gamma,
+                self.cfg.gae_lambda,
+            )
+            parts.append(
+                (
+                    f.obs.reshape(-1, f.obs.shape[-1]),
+                    f.actions.reshape(-1, f.actions.shape[-1]),
+                    f.logp.ravel(),
+                    f.values.ravel(),
+                    adv.ravel(),
+                    ret.ravel(),
+                    f.tasks[f.task_index].reshape(-1, f.tasks.shape[-1]),
+                )
+            )
+        cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
+        return Batch(*cols)
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """E epochs of minibatch PPO on the batch; then fold its observations into the normalizer.
+
+        The normalizer changes only after the update so that the ratio π/π_old starts at 1.
+        """
+        cfg = self.cfg
+        obs = torch.as_tensor(batch.obs, dtype=torch.float32)
+        actions = torch.as_tensor(batch.actions, dtype=torch.float32)
+        old_logp = torch.as_tensor(batch.logp, dtype=torch.float32)
+        returns = torch.as_tensor(batch.returns, dtype=torch.float32)
+        adv = torch.as_tensor(batch.advantages, dtype=torch.float32)
+        n = len(obs)
+        mb = min(cfg.minibatch_size, n)
+        sums: dict[str, float] = {}
+        steps = 0
+        for _ in range(cfg.num_epochs):
+            order = self.rng.permutation(n)
+            for start in range(0, n - mb + 1, mb):
+                idx = torch.from_numpy(order[start : start + mb])
+                a = adv[idx]
+                a = (a - a.mean()) / (a.std() + 1e-8)  # advantage normalization per minibatch
+                mean, value = self.policy(obs[idx])
+                new_logp = self.policy.log_prob(mean, actions[idx])
+                loss, stats = ppo_loss(
+                    new_logp,
+                    old_logp[idx],
+                    a,
+                    value,
+                    returns[idx],
+                    self.policy.entropy(),
+                    cfg.clip_coef,
+                    cfg.vf_coef,
+                    cfg.ent_coef,
+                )
+                self.policy_opt.zero_grad()
+                self.value_opt.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.policy.policy_parameters(), cfg.max_grad_norm)
+                torch.nn.utils.clip_grad_norm_(self.policy.value_parameters(), cfg.max_grad_norm)
+                self.policy_opt.step()
+                self.value_opt.step()
+                for k, v in stats.items():
+                    sums[k] = sums.get(k, 0.0) + v
+                steps += 1
+        self.normalizer.update(batch.obs)
+        self.policy.set_normalizer(self.normalizer)
+        self.version += 1
+        metrics = {k: v / max(steps, 1) for k, v in sums.items()}
+        var_y = float(np.var(batch.returns))
+        metrics["explained_variance"] = (
+            float(1 - np.var(batch.returns - batch.values) / var_y) if var_y > 0 else 0.0
+        )
+        metrics["std"] = float(self.policy.log_std.detach().exp().mean())
+        return metrics
+
+    def state_dict(self) -> dict:
+        return {
+            "policy": self.policy.state_dict(),
+            "policy_opt": self.policy_opt.state_dict(),
+            "value_opt": self.value_opt.state_dict(),
+            "normalizer": self.normalizer.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "version": self.version,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.policy.load_state_dict(state["policy"])
+        self.policy_opt.load_state_dict(state["policy_opt"])
+        self.value_opt.load_state_dict(state["value_opt"])
+        self.normalizer.load_state_dict(state["normalizer"])
+        self.rng.bit_generator.state = state["rng"]
+        self.version = int(state["version"])

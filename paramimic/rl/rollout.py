@@ -1,0 +1,217 @@
+"""The stepping loop: M environments stepped together with one batched policy forward per step.
+
+The same code runs in the serial trainer and inside the Ray rollout actors. Task parameters come
+from a `task_source(n)` (the curriculum) whenever episodes start; each finished episode yields
+an `EpisodeSummary`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from paramimic.envs import REWARD_TERMS, ParamEnv
+from paramimic.rl.networks import ActorCritic
+
+TaskSource = Callable[[int], np.ndarray]  # n -> [n, d] task parameters
+
+
+@dataclass
+class EpisodeSummary:
+    episode_id: str
+    task: np.ndarray  # [d]
+    ret: float  # undiscounted sum of rewards
+    length: int
+    fell: bool
+    diverged: bool
+    reward_terms: dict[str, float]  # per-term sums over the episode
+
+    def to_dict(self) -> dict:
+        return {
+            "episode_id": self.episode_id,
+            "task": self.task.tolist(),
+            "return": self.ret,
+            "length": self.length,
+            "fell": self.fell,
+            "diverged": self.diverged,
+            "reward_terms": self.reward_terms,
+        }
+
+
+@dataclass
+class Fragment:
+    """T steps of M environments; every array is [T, M, ...]."""
+
+    obs: np.ndarray  # [T, M, obs_dim] raw observations
+    actions: np.ndarray  # [T, M, A]
+    logp: np.ndarray  # [T, M]
+    values: np.ndarray  # [T, M]
+    next_values: np.ndarray  # [T, M] V of the true next state (final obs when truncated)
+    rewards: np.ndarray  # [T, M] continuous rewards
+    spike_rewards: np.ndarray  # [T, M]
+    dphi: np.ndarray  # [T, M] reference time advanced per step
+    terminated: np.ndarray  # [T, M] bool
+    truncated: np.ndarray  # [T, M] bool
+    task_index: np.ndarray  # [T, M] row of `tasks` in force at each step
+    tasks: np.ndarray  # [K, d]
+    episodes: list[EpisodeSummary] = field(default_factory=list)
+    policy_version: int = 0
+
+    @property
+    def num_steps(self) -> int:
+        return int(self.rewards.size)
+
+
+class RolloutWorker:
+    """Holds M ParamEnvs and a policy copy; `collect(T)` returns a Fragment."""
+
+    def __init__(
+        self,
+        make_env: Callable[[], ParamEnv],
+        num_envs: int,
+        obs_dim: int,
+        act_dim: int,
+        hidden: tuple[int, ...],
+        seed: int,
+        worker_id: int = 0,
+        task_source: TaskSource | None = None,
+    ) -> None:
+        self.envs = [make_env() for _ in range(num_envs)]
+        self.policy = ActorCritic(obs_dim, act_dim, hidden, init_log_std=0.0)
+        self.policy.eval()
+        self.policy_version = -1
+        self.rng = np.random.default_rng(seed)
+        self.worker_id = worker_id
+        self.task_source = task_source
+        self._episode_counter = 0
+        self._seed = seed
+        self._obs: np.ndarray | None = None
+        self._task_rows: list[np.ndarray] = []
+        self._ep: list[dict] = []
+        self.diverged_episodes = 0
+
+    def set_weights(self, weights: dict[str, torch.Tensor], version: int) -> None:
+        if version != self.policy_version:
+            self.policy.load_state_dict(weights)
+            self.policy_version = version
+
+    def _tasks(self, n: int) -> np.ndarray | None:
+        return None if self.task_source is None else np.asarray(self.task_source(n))
+
+    def _start(self, i: int, task: np.ndarray | None, seed: int | None = None) -> np.ndarray:
+        env = self.envs[i]
+        obs, info = env.reset(seed=seed, options=None if task is None else {"task": task})
+        self._ep[i] = {
+            "id": f"w{self.worker_id}-s{self._seed}-e{self._episode_counter}",
+            "task": info["task"],
+            "ret": 0.0,
+            "len": 0,
+            "terms": dict.fromkeys(REWARD_TERMS, 0.0),
+        }
+        self._episode_counter += 1
+        return obs
+
+    def _reset_all(self) -> None:
+        m = len(self.envs)
+        self._ep = [{}] * m
+        tasks = self._tasks(m)
+        seeds = self.rng.integers(0, 2**31 - 1, size=m)
+        self._obs = np.stack(
+            [self._start(i, None if tasks is None else tasks[i], int(seeds[i])) for i in range(m)]
+        )
+
+    @torch.no_grad()
+    def collect(self, num_steps: int) -> Fragment:
+        if self._obs is None:
+            self._reset_all()
+        m, envs = len(self.envs), self.envs
+        obs_dim = self._obs.shape[1]
+        act_dim = self.policy.act_dim
+        T = num_steps
+        obs_buf = np.empty((T, m, obs_dim), np.float32)
+        act_buf = np.empty((T, m, act_dim), np.float32)
+        logp_buf = np.empty((T, m), np.float32)
+        val_buf = np.empty((T, m), np.float32)
+        rew = np.empty((T, m), np.float32)
+        spike = np.zeros((T, m), np.float32)
+        dphi = np.ones((T, m), np.float32)
+        term = np.zeros((T, m), bool)
+        trunc = np.zeros((T, m), bool)
+        task_index = np.empty((T, m), np.int32)
+        # tasks in force: rows are added as episodes start
+        tasks: list[np.ndarray] = [self._ep[i]["task"] for i in range(m)]
+        current = np.arange(m)
+        final_obs: list[tuple[int, int, np.ndarray]] = []
+        episodes: list[EpisodeSummary] = []
+        obs = self._obs
+        for t in range(T):
+            noise = self.rng.standard_normal((m, act_dim))
+            actions, logp, values = self.policy.act(obs, noise)
+            obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs, actions, logp, values
+            task_index[t] = current
+            next_obs = np.empty_like(obs)
+            ended = []
+            for i in range(m):
+                o, r, te, tr, info = envs[i].step(actions[i])
+                ep = self._ep[i]
+                ep["ret"] += r
+                ep["len"] += 1
+                terms = ep["terms"]
+                for k, v in info["reward_terms"].items():
+                    terms[k] += v
+                rew[t, i] = r - info["reward_spike"]
+                spike[t, i] = info["reward_spike"]
+                dphi[t, i] = info["dphi"]
+                term[t, i] = te
+                trunc[t, i] = tr
+                next_obs[i] = o
+                if te or tr:
+                    if tr:
+                        final_obs.append((t, i, o))
+                    self.diverged_episodes += int(info["diverged"])
+                    episodes.append(
+                        EpisodeSummary(
+                            ep["id"],
+                            np.asarray(ep["task"]),
+                            ep["ret"],
+                            ep["len"],
+                            bool(info["fell"]),
+                            bool(info["diverged"]),
+                            ep["terms"],
+                        )
+                    )
+                    ended.append(i)
+            if ended:
+                new_tasks = self._tasks(len(ended))
+                for j, i in enumerate(ended):
+                    next_obs[i] = self._start(i, None if new_tasks is None else new_tasks[j])
+                    tasks.append(self._ep[i]["task"])
+                    current[i] = len(tasks) - 1
+            obs = next_obs
+        self._obs = obs
+        next_values = np.empty_like(val_buf)
+        next_values[:-1] = val_buf[1:]
+        next_values[-1] = self.policy.value(obs)
+        if final_obs:
+            vals = self.policy.value(np.stack([o for _, _, o in final_obs]))
+            for (t, i, _), v in zip(final_obs, vals, strict=True):
+                next_values[t, i] = v
+        return Fragment(
+            obs_buf,
+            act_buf,
+            logp_buf,
+            val_buf,
+            next_values,
+            rew,
+            spike,
+            dphi,
+            term,
+            trunc,
+            task_index,
+            np.stack(tasks),
+            episodes,
+            self.policy_version,
+        )

@@ -1,0 +1,42 @@
+from pathlib import Path
+
+import pytest
+
+from paramimic.config import ConfigError, load_config
+
+CONFIGS = sorted(Path(__file__).parent.parent.glob("configs/*.yaml"))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
+def test_shipped_configs_load(path):
+    cfg = load_config(path)
+    assert cfg.name == path.stem
+
+
+def _write(tmp_path, text):
+    p = tmp_path / "bad.yaml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize(
+    "text, field, reason",
+    [
+        ("task: {left_leg_length: [1.3, 0.7]}", "task.left_leg_length", "min 1.3 > max 0.7"),
+        ("character: spider", "character", "unknown character 'spider'"),
+        ("ppo: {policy_lr: -0.001}", "ppo.policy_lr", "greater than 0"),
+        ("ppo: {num_stepz: 100}", "ppo.num_stepz", "Extra inputs are not permitted"),
+        ("task: {arm_length: [0.8, 1.2]}", "task.arm_length", "not a parameter of 'walker'"),
+        ("curriculum: {k: -1}", "curriculum.k", "greater than or equal to 0"),
+    ],
+)
+def test_bad_configs_name_the_field(tmp_path, text, field, reason):
+    with pytest.raises(ConfigError) as err:
+        load_config(_write(tmp_path, text))
+    assert field in str(err.value)
+    assert reason in str(err.value)
+
+
+def test_unreadable_yaml(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read config"):
+        load_config(_write(tmp_path, "task: [unclosed"))

@@ -1,0 +1,115 @@
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from paramimic.envs import REGISTERED, REWARD_TERMS, ParamEnv
+
+LEGS = {
+    "left_leg_length": (0.7, 1.3),
+    "right_leg_length": (0.7, 1.3),
+    "target_velocity": (0.5, 1.5),
+}
+
+
+@pytest.mark.parametrize("env_id", sorted(REGISTERED))
+def test_registered_envs_pass_gymnasium_checks(env_id):
+    env = gym.make(env_id)
+    check_env(env.unwrapped)
+    u = env.unwrapped
+    assert isinstance(u.model, mujoco.MjModel) and isinstance(u.data, mujoco.MjData)
+    assert u.frame_skip == 20  # 600 Hz physics, 30 Hz control ([WL19] Table 2)
+    env.close()
+
+
+def test_reset_uses_the_given_task_and_builds_that_body():
+    env = ParamEnv("walker", LEGS)
+    obs, info = env.reset(
+        seed=0,
+        options={"task": {"left_leg_length": 0.7, "right_leg_length": 1.3, "target_velocity": 1.5}},
+    )
+    np.testing.assert_allclose(info["task"], [0.7, 1.3, 1.5])
+    np.testing.assert_allclose(obs[:3], [0.7, 1.3, 1.5], rtol=1e-6)  # a is part of the state
+    assert env.character.leg_lengths == pytest.approx([0.9 * 1.3, 0.9 * 0.7])  # right, left
+    tasks = np.array([env.reset(seed=s)[1]["task"] for s in range(200)])
+    assert np.all(tasks >= [0.7, 0.7, 0.5]) and np.all(tasks <= [1.3, 1.3, 1.5])
+    assert tasks[:, 0].std() > 0.1  # drawn uniformly when not given
+
+
+def test_task_outside_the_space_is_rejected():
+    env = ParamEnv("walker", LEGS)
+    with pytest.raises(ValueError, match="not inside the task space"):
+        env.reset(options={"task": [2.0, 1.0, 1.0]})
+    with pytest.raises(ValueError, match="unknown task parameters"):
+        ParamEnv("walker", {"wing_span": (1, 2)})
+
+
+def test_reward_terms_are_bells_and_info_carries_them():
+    env = ParamEnv("walker", LEGS)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        obs, r, term, trunc, info = env.step(rng.uniform(-1, 1, 6))
+        assert 0.0 < r <= 1.0
+        assert set(info["reward_terms"]) == set(REWARD_TERMS)
+        for k in ("pose", "velocity", "com_velocity", "direction", "torque"):
+            assert 0.0 <= info["reward_terms"][k] <= 1.0
+        assert 0.0 <= info["reward_terms"]["end_effector"] <= 3.0  # Σ over 3 end-effectors
+        assert info["dphi"] == 1.0 and info["reward_spike"] == 0.0
+        if term or trunc:
+            break
+
+
+def test_reward_matches_eq_4_to_7_on_a_known_state():
+    env = ParamEnv("walker", {"target_velocity": (1.0, 1.0)})
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.zeros(6))
+    t = info["reward_terms"]
+    w = np.array([5, 2, 2, 1, 1, 1], float)  # Table 3, biped (lower body)
+    weighted = (
+        w[0] * t["pose"]
+        + w[1] * t["velocity"]
+        + w[2] * t["end_effector"]
+        + w[3] * t["com_velocity"]
+        + w[4] * t["direction"]
+        + w[5] * t["torque"]
+    )
+    assert r == pytest.approx(weighted / (5 + 2 + 2 * 3 + 1 + 1 + 1))
+    assert t["task"] == pytest.approx((t["com_velocity"] + t["direction"]) / 16)
+
+
+def test_pushed_over_body_falls_and_terminates():
+    env = ParamEnv("walker", {"global_scale": (1.4, 1.4)})
+    env.reset(seed=0)
+    env.data.qpos[2] = 1.3  # pitch the torso far back
+    _, _, term, trunc, info = env.step(np.zeros(6))
+    assert term and not trunc and info["fell"] and not info["diverged"]
+
+
+def test_time_limit_truncates():
+    env = ParamEnv("walker", {}, config={"max_episode_seconds": 0.2})
+    env.reset(seed=0)
+    ends = [env.step(np.zeros(6))[2:4] for _ in range(6)]  # 0.2 s at 30 Hz = 6 steps
+    assert ends[-1] == (False, True)
+    assert not any(term or trunc for term, trunc in ends[:-1])
+
+
+def test_diverging_simulation_ends_the_episode_not_the_process():
+    env = ParamEnv("walker", {})
+    obs0, _ = env.reset(seed=0)
+    env.data.qvel[:] = np.nan
+    obs, r, term, trunc, info = env.step(np.zeros(6))
+    assert term and info["diverged"] and r == 0.0
+    assert np.isfinite(obs).all()
+    obs, _ = env.reset(seed=1)  # and the env keeps working
+    assert np.isfinite(env.step(np.zeros(6))[0]).all()
+
+
+def test_same_seed_same_episode():
+    def roll(seed):
+        env = ParamEnv("walker", LEGS)
+        env.reset(seed=seed)
+        return np.array([env.step(np.full(6, 0.1))[0] for _ in range(20)])
+
+    np.testing.assert_array_equal(roll(5), roll(5))

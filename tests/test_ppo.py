@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+import torch
+
+from paramimic.rl.ppo import ppo_loss
+
+
+def test_clipped_loss_by_hand():
+    # ratios e^{Δlogp}: [2.0, 0.5, 1.0]; advantages [1, 1, -1]; ε = 0.2
+    # sample 0: min(2·1, 1.2·1) = 1.2 ; sample 1: min(0.5, 0.8) = 0.5 ; sample 2: min(-1, -1) = -1
+    # policy loss = -(1.2 + 0.5 - 1)/3 = -0.7/3
+    # value loss = ½ mean((V − R)²) with V − R = [1, -2, 0] → ½·5/3
+    # total = -0.7/3 + 0.5·(5/6) − 0.01·1.5
+    old = torch.zeros(3)
+    new = torch.log(torch.tensor([2.0, 0.5, 1.0]))
+    adv = torch.tensor([1.0, 1.0, -1.0])
+    values = torch.tensor([1.0, 0.0, 3.0])
+    returns = torch.tensor([0.0, 2.0, 3.0])
+    loss, stats = ppo_loss(new, old, adv, values, returns, torch.tensor(1.5), 0.2, 0.5, 0.01)
+    assert stats["policy_loss"] == pytest.approx(-0.7 / 3)
+    assert stats["value_loss"] == pytest.approx(5 / 6)
+    assert float(loss) == pytest.approx(-0.7 / 3 + 0.5 * 5 / 6 - 0.015, rel=1e-6)
+    assert stats["clip_fraction"] == pytest.approx(2 / 3)
+
+
+def test_gradient_vanishes_outside_the_clip_region():
+    new = torch.tensor([np.log(2.0)], requires_grad=True)
+    loss, _ = ppo_loss(
+        new,
+        torch.zeros(1),
+        torch.ones(1),
+        torch.zeros(1),
+        torch.zeros(1),
+        torch.tensor(0.0),
+        0.2,
+        0.0,
+        0.0,
+    )
+    loss.backward()
+    assert float(new.grad) == 0.0  # ratio 2 > 1.2 with A > 0: clipped, no push further
+    new2 = torch.tensor([0.0], requires_grad=True)
+    loss2, _ = ppo_loss(
+        new2,
+        torch.zeros(1),
+        torch.ones(1),
+        torch.zeros(1),
+        torch.zeros(1),
+        torch.tensor(0.0),
+        0.2,
+        0.0,
+        0.0,
+    )
+    loss2.backward()
+    assert float(new2.grad) == pytest.approx(-1.0)  # d(−ρA)/dlogp at ρ = 1
