@@ -1,0 +1,80 @@
+"""The `paramimic` command as a user runs it: a real subprocess, real files."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+TINY = {
+    "character": "hopper",
+    "task": {"leg_length": [0.8, 1.2], "torso_length": [0.9, 1.1], "target_velocity": [1, 1]},
+    "env": {"max_episode_seconds": 2.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+    "actors": {"num_envs": 4},
+    "train": {"total_steps": 512, "checkpoint_every": 1},
+}
+
+
+def _cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "services.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=300, **kw)
+
+
+def test_train_then_eval_writes_json(tmp_path):
+    cfg = tmp_path / "tiny.yaml"
+    cfg.write_text(yaml.safe_dump(TINY))
+    run = tmp_path / "run"
+    res = _cli("train", cfg, "--serial", "--run-dir", run)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert (run / "checkpoints" / "latest.pt").is_file()
+    lines = (run / "metrics.jsonl").read_text().splitlines()
+    assert [json.loads(x)["iteration"] for x in lines] == [1, 2]
+
+    out = tmp_path / "eval.json"
+    res = _cli("eval", run, "--episodes", 6, "--grid", 2, "--seed", 1, "--out", out)
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads(out.read_text())
+    assert report["episodes"] == 6
+    for key in ("mean_return", "task_achievement", "fall_percent", "worst_decile_return"):
+        assert isinstance(report[key], float)
+    assert 0 <= report["fall_percent"] <= 100
+    assert set(report["uniformity"]) == {"min_over_mean", "coefficient_of_variation"}
+    assert report["grid"]["dims"] == ["leg_length", "torso_length"]
+    assert len(report["grid"]["returns"]) == 2 and len(report["grid"]["returns"][0]) == 2
+
+    res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume", "--total-steps", 768)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "resumed at iteration 2" in res.stdout
+    assert json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])["iteration"] == 3
+
+
+def test_bad_config_fails_before_anything_starts(tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(yaml.safe_dump({**TINY, "ppo": {"policy_lr": -1}}))
+    res = _cli("train", cfg, "--serial", "--run-dir", tmp_path / "run")
+    assert res.returncode == 2
+    assert "ppo.policy_lr" in res.stdout and "greater than 0" in res.stdout
+    assert not (tmp_path / "run").exists()
+
+
+def test_ctrl_c_checkpoints_and_exits(tmp_path):
+    cfg = tmp_path / "long.yaml"
+    cfg.write_text(yaml.safe_dump({**TINY, "train": {"total_steps": 10**9,
+                                                     "checkpoint_every": 1000}}))
+    run = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "services.cli", "train", str(cfg), "--serial",
+                             "--run-dir", str(run)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env={**os.environ})
+    metrics = Path(run / "metrics.jsonl")
+    deadline = time.time() + 120
+    while time.time() < deadline and not (metrics.exists() and metrics.read_text().strip()):
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 0, out
+    assert (run / "checkpoints" / "latest.pt").is_file()
