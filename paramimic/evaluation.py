@@ -28,15 +28,18 @@ class EpisodeResult:
     seconds: float
 
 
+Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
+
+
+def deterministic(policy: ActorCritic) -> Act:
+    """The policy's mean action."""
+    return lambda obs: policy.act(obs, None)[0]
+
+
 def run_episodes(
-    policy: ActorCritic,
-    make_env: Callable[[], ParamEnv],
-    tasks: np.ndarray,
-    num_envs: int,
-    seed: int,
-    deterministic: bool = True,
+    act: Act, make_env: Callable[[], ParamEnv], tasks: np.ndarray, num_envs: int, seed: int
 ) -> list[EpisodeResult]:
-    """One episode per task, `num_envs` at a time with a batched forward pass."""
+    """One episode per task, `num_envs` at a time with one batched `act` call per step."""
     envs = [make_env() for _ in range(min(num_envs, len(tasks)))]
     rng = np.random.default_rng(seed)
     results: list[EpisodeResult | None] = [None] * len(tasks)
@@ -56,8 +59,7 @@ def run_episodes(
     for j in range(len(envs)):
         start(j)
     while any(s is not None for s in slots):
-        noise = None if deterministic else rng.standard_normal((len(envs), policy.act_dim))
-        actions, _, _ = policy.act(obs, noise)
+        actions = act(obs)
         for j, env in enumerate(envs):
             s = slots[j]
             if s is None:
@@ -108,7 +110,7 @@ def summarize(results: list[EpisodeResult]) -> dict:
 
 
 def evaluate(
-    policy: ActorCritic,
+    act: Act,
     make_env: Callable[[], ParamEnv],
     space: TaskSpace,
     episodes: int,
@@ -120,10 +122,10 @@ def evaluate(
     """Random tasks (uniform over A) for the headline numbers, plus a grid over two dims."""
     rng = np.random.default_rng(seed)
     tasks = space.sample(rng, episodes)
-    report = summarize(run_episodes(policy, make_env, tasks, num_envs, seed))
+    report = summarize(run_episodes(act, make_env, tasks, num_envs, seed))
     if grid_dims is not None:
         xs, ys, pts = space.grid(grid_dims, grid_size)
-        grid = run_episodes(policy, make_env, pts, num_envs, seed + 1)
+        grid = run_episodes(act, make_env, pts, num_envs, seed + 1)
         rets = np.array([r.ret for r in grid]).reshape(grid_size, grid_size)
         report["grid"] = {
             "dims": list(grid_dims),

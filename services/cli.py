@@ -131,7 +131,7 @@ def evaluate_cmd(
 ) -> None:
     """Fall %, task achievement, returns and uniformity of a trained controller."""
     from paramimic.envs import make_env
-    from paramimic.evaluation import evaluate
+    from paramimic.evaluation import deterministic, evaluate
     from paramimic.rl.networks import ActorCritic
     from services.learner import checkpoint
 
@@ -149,7 +149,7 @@ def evaluate_cmd(
     policy.eval()
     probe = make_env(cfg.character, cfg.task, cfg.env)
     report = evaluate(
-        policy,
+        deterministic(policy),
         lambda: make_env(cfg.character, cfg.task, cfg.env),
         probe.task_space,
         episodes,

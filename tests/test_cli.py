@@ -21,8 +21,13 @@ TINY = {
 
 
 def _cli(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "services.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=300, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        **kw,
+    )
 
 
 def test_train_then_eval_writes_json(tmp_path):
@@ -64,12 +69,26 @@ def test_bad_config_fails_before_anything_starts(tmp_path):
 
 def test_ctrl_c_checkpoints_and_exits(tmp_path):
     cfg = tmp_path / "long.yaml"
-    cfg.write_text(yaml.safe_dump({**TINY, "train": {"total_steps": 10**9,
-                                                     "checkpoint_every": 1000}}))
+    cfg.write_text(
+        yaml.safe_dump({**TINY, "train": {"total_steps": 10**9, "checkpoint_every": 1000}})
+    )
     run = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "services.cli", "train", str(cfg), "--serial",
-                             "--run-dir", str(run)], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env={**os.environ})
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "services.cli",
+            "train",
+            str(cfg),
+            "--serial",
+            "--run-dir",
+            str(run),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**os.environ},
+    )
     metrics = Path(run / "metrics.jsonl")
     deadline = time.time() + 120
     while time.time() < deadline and not (metrics.exists() and metrics.read_text().strip()):

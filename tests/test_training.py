@@ -6,28 +6,35 @@ import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
-from paramimic.evaluation import run_episodes
+from paramimic.evaluation import deterministic, run_episodes
 from services.learner import checkpoint
 from services.learner.trainer import SerialBackend, Trainer
 
 
 def _config(**train) -> ExperimentConfig:
-    return ExperimentConfig.model_validate({
-        "name": "test",
-        "character": "walker",
-        "task": {"target_velocity": [1.0, 1.0]},
-        "env": {"max_episode_seconds": 10.0},
-        "ppo": {"num_steps": 4096, "minibatch_size": 512},
-        "curriculum": {"k": 0.0},
-        "actors": {"num_envs": 16},
-        "train": {"seed": 0, **train},
-    })
+    return ExperimentConfig.model_validate(
+        {
+            "name": "test",
+            "character": "walker",
+            "task": {"target_velocity": [1.0, 1.0]},
+            "env": {"max_episode_seconds": 10.0},
+            "ppo": {"num_steps": 4096, "minibatch_size": 512},
+            "curriculum": {"k": 0.0},
+            "actors": {"num_envs": 16},
+            "train": {"seed": 0, **train},
+        }
+    )
 
 
 def _eval_return(trainer: Trainer, cfg: ExperimentConfig) -> float:
     tasks = np.tile(trainer.space.center, (8, 1))
-    res = run_episodes(trainer.learner.policy, lambda: make_env(cfg.character, cfg.task, cfg.env),
-                       tasks, num_envs=8, seed=123)
+    res = run_episodes(
+        deterministic(trainer.learner.policy),
+        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        tasks,
+        num_envs=8,
+        seed=123,
+    )
     return float(np.mean([r.ret for r in res]))
 
 
@@ -61,14 +68,16 @@ def _assert_same_state(a, b):
 
 
 def test_checkpoint_resume_restores_everything(tmp_path):
-    cfg = ExperimentConfig.model_validate({
-        "character": "walker",
-        "task": {"left_leg_length": [0.8, 1.2], "right_leg_length": [0.8, 1.2]},
-        "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
-        "curriculum": {"k": 10.0, "p_mcmc": 1, "n_mcmc": 50},
-        "actors": {"num_envs": 4},
-        "train": {"checkpoint_every": 1},
-    })
+    cfg = ExperimentConfig.model_validate(
+        {
+            "character": "walker",
+            "task": {"left_leg_length": [0.8, 1.2], "right_leg_length": [0.8, 1.2]},
+            "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+            "curriculum": {"k": 10.0, "p_mcmc": 1, "n_mcmc": 50},
+            "actors": {"num_envs": 4},
+            "train": {"checkpoint_every": 1},
+        }
+    )
     first = Trainer(cfg, tmp_path)
     backend = SerialBackend(cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks)
     first.train(backend, total_steps=3 * 256)

@@ -40,16 +40,17 @@ def _motion(period: float, rows: dict[str, tuple[float, float, float, float]]) -
     return SinusoidalMotion(names, period, *cols)
 
 
-# Walking: the right leg swings forward around φ = 0, the left half a cycle later. Hip flexion
-# is positive forward, knees flex negative and bend most in mid-swing, ankles roll heel to toe.
+# Walking at about 1 m/s: two steps of ~0.5 m per 1 s cycle. The right leg swings forward around
+# φ = 0, the left half a cycle later. Hip flexion is positive forward, knees flex negative and
+# bend most in mid-swing, ankles roll heel to toe.
 WALKER_GAIT = _motion(
     1.0,
     {
         #            offset  a1     a2    phase
-        "hip_r": (0.20, 0.45, 0.00, 0.00),
+        "hip_r": (0.20, 0.32, 0.00, 0.00),
         "knee_r": (-0.45, -0.35, 0.05, 0.25),
         "ankle_r": (0.00, 0.15, 0.00, -0.10),
-        "hip_l": (0.20, 0.45, 0.00, 0.50),
+        "hip_l": (0.20, 0.32, 0.00, 0.50),
         "knee_l": (-0.45, -0.35, 0.05, 0.75),
         "ankle_l": (0.00, 0.15, 0.00, 0.40),
     },
