@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -151,6 +152,7 @@ def _train_sb3(steps: int, run_dir: Path) -> dict:
 def run_stage(stage: str, steps: int) -> dict:
     warnings.filterwarnings("ignore")
     run_dir = ROOT / "runs" / "bench" / stage
+    shutil.rmtree(run_dir, ignore_errors=True)  # a stage always trains from scratch
     if stage == "ours_base":
         report = _train_ours("configs/walker_base.yaml", steps, {}, run_dir)
     elif stage == "sb3_base":

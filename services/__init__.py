@@ -1,0 +1,1 @@
+"""Runtime shells around the paramimic library: CLI, learner, actors, sampler, API."""

@@ -52,7 +52,11 @@ class MarginalValue:
         tasks = np.asarray(tasks, dtype=np.float64)
         values = np.asarray(values, dtype=np.float64)
         if self.mu is None:
+            # start μ and V̄'s output at the first batch's mean value, so that V̄ learns the
+            # differences between tasks rather than spending its first updates on the offset
             self.mu = float(values.mean())
+            with torch.no_grad():
+                self.net[-1].bias.fill_(self.mu)
         loss_value = float("nan")
         for _ in range(steps):
             idx = self.rng.integers(0, len(values), size=min(self.batch_size, len(values)))

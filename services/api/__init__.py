@@ -1,0 +1,1 @@
+"""The progress API (Part 3): FastAPI over Redis."""

@@ -1,0 +1,1 @@
+"""The learner process: the training loop and checkpoints."""

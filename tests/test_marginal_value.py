@@ -1,0 +1,35 @@
+import numpy as np
+import pytest
+
+from paramimic.curriculum import MarginalValue, TaskSpace
+from paramimic.rl.networks import RunningMeanStd
+
+SPACE = TaskSpace.from_ranges({"left": (0.7, 1.3), "right": (0.7, 1.3), "v": (1.0, 1.0)})
+
+
+def test_marginal_value_regresses_values_on_task_parameters():
+    rng = np.random.default_rng(0)
+    a = SPACE.sample(rng, 4000)
+    # a known V̄: asymmetric legs are harder, plus state noise that V̄ marginalizes out
+    v = 12.0 - 20.0 * np.abs(a[:, 0] - a[:, 1]) + rng.normal(0, 1.0, len(a))
+    mv = MarginalValue(SPACE, hidden=(64, 64), lr=3e-3, mu_lr=1e-3, batch_size=128, seed=0)
+    mv.fit(a, v, steps=3000)
+    test = np.array([[1.0, 1.0, 1.0], [0.7, 1.3, 1.0], [1.3, 0.7, 1.0]])
+    np.testing.assert_allclose(mv.predict(test), [12.0, 0.0, 0.0], atol=1.0)
+    # μ ← μ − α_μ (μ − mean v): starts at the first batch's mean and stays at the average
+    assert mv.mu == pytest.approx(v.mean(), abs=0.3)
+    clone = MarginalValue(SPACE, seed=5)
+    clone.from_state(mv.to_state())
+    np.testing.assert_array_equal(clone.predict(test), mv.predict(test))
+    assert clone.mu == mv.mu
+
+
+def test_running_mean_std_matches_batch_statistics():
+    rng = np.random.default_rng(1)
+    x = rng.normal(3.0, 2.0, (1000, 4))
+    rms = RunningMeanStd(4)
+    for chunk in np.array_split(x, 7):
+        rms.update(chunk)
+    np.testing.assert_allclose(rms.mean, x.mean(axis=0))
+    np.testing.assert_allclose(rms.var, x.var(axis=0))
+    assert rms.count == 1000
