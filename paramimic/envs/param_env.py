@@ -83,6 +83,7 @@ class ParamEnv(gym.Env):
         self.model: mujoco.MjModel
         self.data: mujoco.MjData
         self._load(self.task_space.center)
+        self._layout()
         self.dt = self.model.opt.timestep * self.frame_skip
         self._max_steps = int(round(self.config.max_episode_seconds / self.dt))
         self._window = max(1, int(round(self.config.com_velocity_window / self.dt)))
@@ -109,15 +110,13 @@ class ParamEnv(gym.Env):
         self._flags_stepping = c.model.opt.disableflags
         self._opt = c.model.opt
         self.data = mujoco.MjData(c.model)
-        self._qs = _as_slice(c.qpos_idx)
-        self._vs = _as_slice(c.qvel_idx)
-        self._ctrl_low, self._ctrl_high = c.ctrl_low, c.ctrl_high
-        self._torque_scale = 1.0 / c.torque_limit
         self._fall_height = self.config.fall_height_ratio * c.hip_height
-        n_ee = len(c.ee_site_ids)
-        # sensordata entries the observation reads: joints, end-effector x and z, up vector x, z
-        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, [0, 2]].ravel()
         self._reference = self._tabulate_reference() if self.motion is not None else None
+
+    def _layout(self) -> None:
+        """Index and weight arrays of the reward and observation; the same for every shape."""
+        c = self.character
+        n_ee = len(c.ee_site_ids)
         rc = self.config.reward
         nj = len(c.qpos_idx)
         # Bells of Eq. 5-7 in sensordata order: pose, joint velocity, each end-effector, torque,
@@ -169,6 +168,8 @@ class ParamEnv(gym.Env):
         tm[t + 1, 3] = tm[t + 2, 4] = tm[t, 5] = 1.0
         tm[t + 1 : t + 3, 6] = w[t + 1 : t + 3]
         self._term_matrix = tm
+        # sensordata entries the observation reads: joints, end-effector x and z, up vector x, z
+        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, [0, 2]].ravel()
         self._obs_sensors = np.concatenate(
             [np.arange(2 * nj), ee, [c.up_sensor.start, c.up_sensor.start + 2]]
         )
@@ -350,8 +351,7 @@ class ParamEnv(gym.Env):
         scalars = (d.qpos[1] + c.hip_height, self._target_v, vx, vz)
         parts = [
             self._task,
-            d.sensordata[self._obs_sensors],  # joint q, dq; end-effectors (x, z) in the root
-            # frame; up vector (x, z)
+            d.sensordata[self._obs_sensors],  # joint q, dq, end-effectors (x, z), up vector
             d.qvel[0:3],  # root velocity: x, z, pitch rate
             scalars,  # root height, target speed, average COM velocity (x, z)
         ]
@@ -371,13 +371,6 @@ class ParamEnv(gym.Env):
     @property
     def sim_time(self) -> float:
         return self._steps * self.dt
-
-
-def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
-    """A basic slice when the indices are contiguous (a view, no copy), else the index array."""
-    if len(idx) and np.all(np.diff(idx) == 1):
-        return slice(int(idx[0]), int(idx[-1]) + 1)
-    return idx
 
 
 REWARD_TERMS = ("pose", "velocity", "end_effector", "com_velocity", "direction", "torque", "task")
