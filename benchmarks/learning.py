@@ -1,7 +1,7 @@
 """Learning quality: paramimic PPO vs Stable-Baselines3 PPO, and adaptive sampling k=0 vs k=10.
 
-Stages (each writes benchmarks/results/learning_<stage>.json; `all` runs them two at a time and
-merges them into benchmarks/results/learning.json):
+Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs them for every
+--seeds, two at a time, and merges them into benchmarks/results/learning.json):
 - `ours_base`: train configs/walker_base.yaml for --steps, evaluate 300 episodes.
 - `sb3_base`: SB3 PPO on the same gymnasium env (paramimic/Walker-v0, same env section) for the
   same steps, with the same PPO hyperparameters (γ, λ, clip, lr, 4096 steps/update as 16 envs x
@@ -10,7 +10,9 @@ merges them into benchmarks/results/learning.json):
 - `legs_k0`, `legs_k10`: configs/walker_legs.yaml with curriculum.k = 0 and 10 at equal budget;
   fall % over 300 random shapes, worst-decile return, uniformity over random shapes and the grid.
 
-    pip install -e ".[bench]"; python benchmarks/learning.py all [--steps 1000000]
+    pip install -e ".[bench]"; python benchmarks/learning.py all [--steps 1000000] [--seeds 0,1,2]
+    python benchmarks/learning.py ours_base --seed 1     # one stage
+    python benchmarks/learning.py merge                  # summarize what is there
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ EVAL_EPISODES = int(__import__("os").environ.get("EVAL_EPISODES", 300))
 EVAL_SEED = 2024
 
 
-def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path) -> dict:
+def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path, seed: int) -> dict:
     import torch
 
     from paramimic.config import load_config
@@ -42,7 +44,9 @@ def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path) -> dict
     from paramimic.evaluation import deterministic, evaluate
     from services.learner.trainer import SerialBackend, Trainer
 
-    cfg = load_config(ROOT / config, {**overrides, "train.run_dir": str(run_dir)})
+    cfg = load_config(
+        ROOT / config, {**overrides, "train.run_dir": str(run_dir), "train.seed": seed}
+    )
     torch.manual_seed(cfg.train.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, run_dir)
@@ -71,7 +75,7 @@ def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path) -> dict
     return report
 
 
-def _train_sb3(steps: int, run_dir: Path) -> dict:
+def _train_sb3(steps: int, run_dir: Path, seed: int) -> dict:
     import gymnasium as gym
     import torch
     from stable_baselines3 import PPO
@@ -82,7 +86,7 @@ def _train_sb3(steps: int, run_dir: Path) -> dict:
     from paramimic.envs import make_env
     from paramimic.evaluation import evaluate
 
-    cfg = load_config(ROOT / "configs/walker_base.yaml")
+    cfg = load_config(ROOT / "configs/walker_base.yaml", {"train.seed": seed})
     torch.set_num_threads(1)
     env_kwargs = {"config": cfg.env.model_dump()}
 
@@ -149,61 +153,85 @@ def _train_sb3(steps: int, run_dir: Path) -> dict:
     return report
 
 
-def run_stage(stage: str, steps: int) -> dict:
+def run_stage(stage: str, steps: int, seed: int) -> dict:
     warnings.filterwarnings("ignore")
-    run_dir = ROOT / "runs" / "bench" / stage
+    run_dir = ROOT / "runs" / "bench" / f"{stage}_s{seed}"
     shutil.rmtree(run_dir, ignore_errors=True)  # a stage always trains from scratch
     if stage == "ours_base":
-        report = _train_ours("configs/walker_base.yaml", steps, {}, run_dir)
+        report = _train_ours("configs/walker_base.yaml", steps, {}, run_dir, seed)
     elif stage == "sb3_base":
-        report = _train_sb3(steps, run_dir)
+        report = _train_sb3(steps, run_dir, seed)
     elif stage in ("legs_k0", "legs_k10"):
         k = 0.0 if stage == "legs_k0" else 10.0
-        report = _train_ours("configs/walker_legs.yaml", steps, {"curriculum.k": k}, run_dir)
+        report = _train_ours("configs/walker_legs.yaml", steps, {"curriculum.k": k}, run_dir, seed)
     else:
         raise SystemExit(f"unknown stage {stage}; stages: {STAGES}")
-    report["stage"] = stage
+    report.update({"stage": stage, "seed": seed})
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"learning_{stage}.json").write_text(json.dumps(report, indent=2))
+    (RESULTS / f"learning_{stage}_s{seed}.json").write_text(json.dumps(report, indent=2))
     return report
 
 
+def _mean(runs: list[dict], key: str) -> float:
+    return float(np.mean([r[key] for r in runs]))
+
+
 def merge() -> dict:
-    stages = {
-        s: json.loads((RESULTS / f"learning_{s}.json").read_text())
-        for s in STAGES
-        if (RESULTS / f"learning_{s}.json").exists()
-    }
-    summary: dict = {"stages": stages}
-    if {"ours_base", "sb3_base"} <= stages.keys():
-        ours, sb3 = stages["ours_base"], stages["sb3_base"]
-        speed_err = (
-            abs(ours["mean_forward_speed"] - ours["target_velocity"]) / ours["target_velocity"]
-        )
+    runs: dict[str, list[dict]] = {}
+    for path in sorted(RESULTS.glob("learning_*_s*.json")):
+        report = json.loads(path.read_text())
+        runs.setdefault(report["stage"], []).append(report)
+    summary: dict = {"runs": {k: [_brief(r) for r in v] for k, v in runs.items()}}
+    if {"ours_base", "sb3_base"} <= runs.keys():
+        ours, sb3 = runs["ours_base"], runs["sb3_base"]
+        speed = _mean(ours, "mean_forward_speed")
+        target = ours[0]["target_velocity"]
         summary["walker_base"] = {
-            "ours_return": ours["mean_return"],
-            "sb3_return": sb3["mean_return"],
-            "ours_ge_sb3": ours["mean_return"] >= sb3["mean_return"],
-            "ours_fall_percent": ours["fall_percent"],
-            "sb3_fall_percent": sb3["fall_percent"],
-            "fall_le_10": ours["fall_percent"] <= 10.0,
-            "ours_forward_speed": ours["mean_forward_speed"],
-            "speed_error_fraction": speed_err,
-            "speed_within_25pc": speed_err <= 0.25,
+            "seeds": {"ours": [r["seed"] for r in ours], "sb3": [r["seed"] for r in sb3]},
+            "ours_return": _mean(ours, "mean_return"),
+            "sb3_return": _mean(sb3, "mean_return"),
+            "ours_ge_sb3": _mean(ours, "mean_return") >= _mean(sb3, "mean_return"),
+            "ours_fall_percent": _mean(ours, "fall_percent"),
+            "sb3_fall_percent": _mean(sb3, "fall_percent"),
+            "fall_le_10": _mean(ours, "fall_percent") <= 10.0,
+            "ours_forward_speed": speed,
+            "speed_error_fraction": abs(speed - target) / target,
+            "speed_within_25pc": abs(speed - target) / target <= 0.25,
+            "ours_train_seconds": _mean(ours, "train_seconds"),
+            "sb3_train_seconds": _mean(sb3, "train_seconds"),
         }
-    if {"legs_k0", "legs_k10"} <= stages.keys():
-        summary["walker_legs"] = {
-            s: {
-                "fall_percent": stages[s]["fall_percent"],
-                "worst_decile_return": stages[s]["worst_decile_return"],
-                "mean_return": stages[s]["mean_return"],
-                "uniformity_random": stages[s]["uniformity"],
-                "uniformity_grid": stages[s].get("grid", {}).get("uniformity"),
+    for k in ("legs_k0", "legs_k10"):
+        if k in runs:
+            summary.setdefault("walker_legs", {})[k] = {
+                "seeds": [r["seed"] for r in runs[k]],
+                "fall_percent": _mean(runs[k], "fall_percent"),
+                "worst_decile_return": _mean(runs[k], "worst_decile_return"),
+                "mean_return": _mean(runs[k], "mean_return"),
+                "uniformity_min_over_mean": float(
+                    np.mean([r["uniformity"]["min_over_mean"] for r in runs[k]])
+                ),
+                "uniformity_cv": float(
+                    np.mean([r["uniformity"]["coefficient_of_variation"] for r in runs[k]])
+                ),
+                "grid_uniformity": [r.get("grid", {}).get("uniformity") for r in runs[k]],
             }
-            for s in ("legs_k0", "legs_k10")
-        }
     (RESULTS / "learning.json").write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def _brief(r: dict) -> dict:
+    keys = (
+        "seed",
+        "env_steps",
+        "train_seconds",
+        "mean_return",
+        "worst_decile_return",
+        "task_achievement",
+        "fall_percent",
+        "mean_forward_speed",
+        "uniformity",
+    )
+    return {k: r[k] for k in keys if k in r} | ({"grid": r["grid"]} if "grid" in r else {})
 
 
 def main() -> None:

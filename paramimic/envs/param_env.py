@@ -32,7 +32,7 @@ SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 INSTABILITY = slice(
     int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQACC) + 1
 )
-MAX_QVEL_SQ = 1e6  # ‖qvel‖² above this (or NaN) is treated as a diverged simulation
+MAX_JOINT_SPEED = 100.0  # rad/s: an RMS joint speed above this is a diverged simulation
 
 
 @lru_cache(maxsize=32)
@@ -148,6 +148,8 @@ class ParamEnv(gym.Env):
         self._weights = w
         self._neg_inv_sigma_dim = -1.0 / (sigma * dims)
         self._err = np.zeros(len(w))
+        # squared joint-velocity error of the reward beyond which the state counts as diverged
+        self._max_velocity_err = nj * MAX_JOINT_SPEED**2
         self._nj = nj
         self._block = slice(0, c.tau_sensor.stop)  # q, dq, ee, tau: one sensordata block
         # squared block entries -> ‖x‖² per bell; torques are scaled by their limits first
@@ -279,20 +281,6 @@ class ParamEnv(gym.Env):
         self._sense()
         self._steps += 1
 
-        qvel = d.qvel
-        if not qvel @ qvel < MAX_QVEL_SQ or d.warning.number[INSTABILITY].sum() > self._unstable:
-            # A diverging simulation ends the episode, never the run: NaN or exploding velocity,
-            # or MuJoCo's own reset of the state on a bad qpos, qvel or qacc.
-            info = {
-                "task": self._task.copy(),
-                "fell": False,
-                "diverged": True,
-                "dphi": 1.0,
-                "reward_spike": 0.0,
-                "reward_terms": dict.fromkeys(REWARD_TERMS, 0.0),
-            }
-            return self._last_obs, 0.0, True, False, info
-
         # [WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` seconds.
         cx, cy, cz = com = d.sensordata[c.com_sensor].tolist()
         ring = self._com
@@ -303,6 +291,14 @@ class ParamEnv(gym.Env):
         ring[self._steps % len(ring)] = com
 
         reward, terms = self._reward(ref)
+        # A diverging simulation ends the episode, never the run: NaN or exploding joint
+        # velocities (their squared error in the reward), or MuJoCo's own reset of the state on
+        # a bad qpos, qvel or qacc.
+        if (
+            not self._err[1] < self._max_velocity_err
+            or d.warning.number[INSTABILITY].sum() > self._unstable
+        ):
+            return self._diverged()
         obs = self._observe()
         self._last_obs = obs
         qpos = d.qpos
@@ -317,6 +313,17 @@ class ParamEnv(gym.Env):
             "reward_terms": terms,
         }
         return obs, reward, fell, truncated, info
+
+    def _diverged(self) -> tuple:
+        info = {
+            "task": self._task.copy(),
+            "fell": False,
+            "diverged": True,
+            "dphi": 1.0,
+            "reward_spike": 0.0,
+            "reward_terms": dict.fromkeys(REWARD_TERMS, 0.0),
+        }
+        return self._last_obs, 0.0, True, False, info
 
     def _sense(self) -> None:
         """Evaluate the sensor block for the current state of the control step."""
