@@ -7,7 +7,7 @@ documented once, here; numbers from the papers name their source.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -106,9 +106,30 @@ class CurriculumConfig(Section):
 
 
 class ActorsConfig(Section):
-    """Rollout workers."""
+    """Rollout workers: in-process for --serial, Ray actors otherwise."""
 
+    num_actors: int | Literal["auto"] = Field(
+        "auto", description="N Ray rollout actors; auto = the cluster's CPUs minus one (min 1)"
+    )
     num_envs: int = Field(16, ge=1, description="M, environments stepped together per worker")
+    steps_per_fragment: int | None = Field(
+        None, ge=1, description="T per env per fragment; default: ppo.num_steps / (N M)"
+    )
+    mode: Literal["sync", "pipelined"] = Field(
+        "sync",
+        description="pipelined: actors sample the next fragment during the update (one "
+        "policy version of lag, corrected by the PPO ratio); sync: they wait",
+    )
+    lost_timeout: PositiveFloat = Field(
+        120.0, description="seconds without any live actor before the learner checkpoints and exits"
+    )
+
+    @field_validator("num_actors")
+    @classmethod
+    def _positive_actors(cls, v: int | str) -> int | str:
+        if isinstance(v, int) and v < 1:
+            raise ValueError("num_actors must be a positive int or 'auto'")
+        return v
 
 
 class TrainConfig(Section):

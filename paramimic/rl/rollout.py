@@ -19,6 +19,24 @@ from paramimic.rl.networks import ActorCritic
 TaskSource = Callable[[int], np.ndarray]  # n -> [n, d] task parameters
 
 
+class TaskQueue:
+    """A batch of task parameters handed out in order; it starts over if it runs out."""
+
+    def __init__(self, tasks: np.ndarray) -> None:
+        self.tasks = np.asarray(tasks, dtype=np.float64)
+        self.next = 0
+
+    def __call__(self, n: int) -> np.ndarray:
+        idx = (self.next + np.arange(n)) % len(self.tasks)
+        self.next += n
+        return self.tasks[idx]
+
+
+def tasks_per_fragment(num_envs: int, num_steps: int) -> int:
+    """Tasks to hand a worker for one fragment: its envs' next episodes, one per 10 steps each."""
+    return num_envs * (1 + num_steps // 10)
+
+
 @dataclass
 class EpisodeSummary:
     episode_id: str
@@ -124,7 +142,10 @@ class RolloutWorker:
         )
 
     @torch.no_grad()
-    def collect(self, num_steps: int) -> Fragment:
+    def collect(self, num_steps: int, tasks: np.ndarray | None = None) -> Fragment:
+        """Step all envs `num_steps` times; episodes that start take `tasks` in order if given."""
+        if tasks is not None:
+            self.task_source = TaskQueue(tasks)
         if self._obs is None:
             self._reset_all()
         m, envs = len(self.envs), self.envs

@@ -20,42 +20,49 @@ from paramimic.config import ExperimentConfig
 from paramimic.curriculum import AdaptiveSampler, MarginalValue, TaskSpace
 from paramimic.envs import make_env
 from paramimic.rl.ppo import PPOLearner
-from paramimic.rl.rollout import EpisodeSummary, Fragment, RolloutWorker
+from paramimic.rl.rollout import EpisodeSummary, Fragment, RolloutWorker, tasks_per_fragment
 from services.learner import checkpoint
 
 
 class RolloutBackend(Protocol):
-    def collect(
-        self, weights: dict[str, torch.Tensor], version: int, steps_per_env: int
-    ) -> list[Fragment]: ...
+    def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]: ...
+
+    def stats(self) -> dict: ...
 
     def close(self) -> None: ...
 
 
 class SerialBackend:
-    """One in-process RolloutWorker stepping `actors.num_envs` environments."""
+    """One in-process RolloutWorker stepping `actors.num_envs` environments: the same loop and
+    the same seeds as Ray actor 0, so that both modes give the same fragments."""
 
     def __init__(
         self,
         cfg: ExperimentConfig,
         obs_dim: int,
         act_dim: int,
-        task_source: Callable[[int], np.ndarray],
+        next_tasks: Callable[[int], np.ndarray],
     ) -> None:
+        m = cfg.actors.num_envs
+        self.steps = cfg.actors.steps_per_fragment or math.ceil(cfg.ppo.num_steps / m)
+        self.n_tasks = tasks_per_fragment(m, self.steps)
+        self.next_tasks = next_tasks
         self.worker = RolloutWorker(
             lambda: make_env(cfg.character, cfg.task, cfg.env),
-            cfg.actors.num_envs,
+            m,
             obs_dim,
             act_dim,
             cfg.ppo.hidden_sizes,
             seed=cfg.train.seed + 1,
             worker_id=0,
-            task_source=task_source,
         )
 
-    def collect(self, weights, version, steps_per_env):
+    def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:
         self.worker.set_weights(weights, version)
-        return [self.worker.collect(steps_per_env)]
+        return [self.worker.collect(self.steps, self.next_tasks(self.n_tasks))]
+
+    def stats(self) -> dict:
+        return {"actors": 0}
 
     def close(self) -> None:
         pass
@@ -92,9 +99,6 @@ class Trainer:
             self.space, cc.k, cc.n_mcmc, cc.chains, cc.burn_in, seed=seed + 3
         )
         self.progress = Progress()
-        self.steps_per_env = math.ceil(cfg.ppo.num_steps / cfg.actors.num_envs)
-        batch = self.steps_per_env * cfg.actors.num_envs
-        self.learner_steps_per_update = cfg.ppo.num_epochs * max(1, batch // cfg.ppo.minibatch_size)
 
     # --- state --------------------------------------------------------------------------------
 
@@ -126,16 +130,13 @@ class Trainer:
         t0 = time.perf_counter()
         if it % cfg.curriculum.p_mcmc == 0 and self.marginal.fitted:
             self.sampler.refill(self.marginal.predict, self.marginal.mu)  # l.3
-        fragments = backend.collect(
-            self.learner.weights(), self.learner.version, self.steps_per_env
-        )
+        fragments = backend.collect(self.learner.weights(), self.learner.version)
         t_collect = time.perf_counter() - t0
         batch = self.learner.build_batch(fragments)
         metrics = self.learner.update(batch)  # l.21-23
         # l.24-26: as many minibatch steps on (a, v) pairs as PPO took on transitions
-        metrics["marginal_loss"] = self.marginal.fit(
-            batch.tasks, batch.values, steps=self.learner_steps_per_update
-        )
+        gradient_steps = cfg.ppo.num_epochs * max(1, len(batch.obs) // cfg.ppo.minibatch_size)
+        metrics["marginal_loss"] = self.marginal.fit(batch.tasks, batch.values, gradient_steps)
         episodes = [e for f in fragments for e in f.episodes]
         steps = sum(f.num_steps for f in fragments)
         self.progress.iteration += 1
@@ -143,6 +144,11 @@ class Trainer:
         self.progress.episodes += len(episodes)
         elapsed = time.perf_counter() - t0
         metrics.update(episode_metrics(episodes))
+        metrics.update(backend.stats())
+        # versions between the policy that sampled each fragment and the one that was updated
+        metrics["policy_lag"] = float(
+            np.mean([self.learner.version - 1 - f.policy_version for f in fragments])
+        )
         metrics.update(
             {
                 "iteration": self.progress.iteration,
