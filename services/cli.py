@@ -31,8 +31,12 @@ def _fail(message: str) -> None:
 def train(
     config: Annotated[Path, typer.Argument(help="experiment YAML, e.g. configs/walker_legs.yaml")],
     serial: Annotated[
-        bool, typer.Option("--serial", help="run everything in this process")
+        bool, typer.Option("--serial", help="run everything in this process, without Ray")
     ] = False,
+    ray_address: Annotated[
+        str | None,
+        typer.Option(help="join this Ray cluster (default: $RAY_ADDRESS, else start a local one)"),
+    ] = None,
     total_steps: Annotated[int | None, typer.Option(help="override train.total_steps")] = None,
     run_dir: Annotated[Path | None, typer.Option(help="override train.run_dir")] = None,
     resume: Annotated[
@@ -40,7 +44,7 @@ def train(
     ] = False,
     seed: Annotated[int | None, typer.Option(help="override train.seed")] = None,
 ) -> None:
-    """Train a controller for CONFIG."""
+    """Train a controller for CONFIG: rollouts on Ray actors, or in-process with --serial."""
     overrides = {
         k: v
         for k, v in {
@@ -54,16 +58,16 @@ def train(
         cfg = load_config(config, overrides)
     except ConfigError as e:
         _fail(str(e))
-    if not serial:
-        _fail("the distributed (Ray) trainer is not part of this release yet; run with --serial")
-    _train_serial(cfg, resume)
+    _train(cfg, resume, serial, ray_address)
 
 
-def _train_serial(cfg: ExperimentConfig, resume: bool) -> None:
+def _train(cfg: ExperimentConfig, resume: bool, serial: bool, ray_address: str | None) -> None:
     from services.learner import checkpoint
     from services.learner.trainer import SerialBackend, Trainer
 
     run_dir = cfg.resolved_run_dir()
+    if not resume and (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
+        _fail(f"{run_dir} already holds a run; pass --resume or another --run-dir")
     run_dir.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, run_dir)
     if resume:
@@ -76,12 +80,28 @@ def _train_serial(cfg: ExperimentConfig, resume: bool) -> None:
             f"resumed at iteration {trainer.progress.iteration}, "
             f"{trainer.progress.env_steps} env steps"
         )
-    elif (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
-        _fail(f"{run_dir} already holds a run; pass --resume or another --run-dir")
     (run_dir / "config.yaml").write_text(
         yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
     )
-    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    started_ray = False
+    fatal: tuple[type[Exception], ...] = ()  # errors that end the run with a message
+    if serial:
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    else:
+        import ray
+
+        from services.learner.cluster import connect
+        from services.learner.ray_backend import AllActorsLost, RayBackend
+
+        fatal = (AllActorsLost,)
+        started_ray = connect(ray_address)
+        backend = RayBackend(
+            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+        )
+        console.print(
+            f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
+            f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"
+        )
     stop = {"flag": False}
 
     def on_sigint(signum, frame):  # first Ctrl-C: finish the iteration, checkpoint, exit
@@ -91,30 +111,42 @@ def _train_serial(cfg: ExperimentConfig, resume: bool) -> None:
     previous = signal.signal(signal.SIGINT, on_sigint)
     total = cfg.train.total_steps
     console.print(f"run directory: {run_dir}")
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
-        TextColumn("{task.fields[info]}"),
-        TimeElapsedColumn(),
-        console=console,
-    ) as bar:
-        task = bar.add_task("training", total=total, completed=trainer.progress.env_steps, info="")
-
-        def show(m: dict) -> None:
-            info = (
-                f"it {m['iteration']}  {m['steps_per_second']:,.0f} steps/s  "
-                f"return {m.get('mean_return', float('nan')):.2f}  "
-                f"fall {m.get('fall_percent', float('nan')):.0f}%"
+    code = 0
+    try:
+        with Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+            TextColumn("{task.fields[info]}"),
+            TimeElapsedColumn(),
+            console=console,
+        ) as bar:
+            task = bar.add_task(
+                "training", total=total, completed=trainer.progress.env_steps, info=""
             )
-            bar.update(task, completed=m["env_steps"], info=info)
 
-        try:
+            def show(m: dict) -> None:
+                info = (
+                    f"it {m['iteration']}  {m['steps_per_second']:,.0f} steps/s  "
+                    f"return {m.get('mean_return', float('nan')):.2f}  "
+                    f"fall {m.get('fall_percent', float('nan')):.0f}%"
+                )
+                if m.get("actor_restarts"):
+                    info += f"  restarts {m['actor_restarts']}"
+                bar.update(task, completed=m["env_steps"], info=info)
+
             trainer.train(backend, total, on_metrics=show, should_stop=lambda: stop["flag"])
-        finally:
-            signal.signal(signal.SIGINT, previous)
-            backend.close()
+    except fatal as e:  # the checkpoint was written by Trainer.train on the way out
+        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
+        code = 3
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        backend.close()
+        if started_ray:
+            ray.shutdown()
     console.print(f"checkpoint: {run_dir / 'checkpoints' / 'latest.pt'}")
+    if code:
+        raise typer.Exit(code=code)
 
 
 @app.command("eval")

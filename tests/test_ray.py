@@ -1,0 +1,150 @@
+"""The distributed actor-learner on a real local Ray (started and stopped here, on loopback)."""
+
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+import ray
+
+from paramimic.config import ExperimentConfig
+from services.learner import checkpoint
+from services.learner.ray_backend import RayBackend
+from services.learner.trainer import SerialBackend, Trainer
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.init(num_cpus=3, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def _cfg(**actors) -> ExperimentConfig:
+    return ExperimentConfig.model_validate(
+        {
+            "character": "hopper",
+            "task": {"leg_length": [0.8, 1.2], "target_velocity": [1.0, 1.0]},
+            "env": {"max_episode_seconds": 2.0},
+            "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+            "curriculum": {"k": 10.0, "p_mcmc": 1, "n_mcmc": 100},
+            "actors": {"num_actors": 2, "num_envs": 4, **actors},
+            "train": {"checkpoint_every": 1, "seed": 5},
+        }
+    )
+
+
+def test_two_actors_deliver_fragments_and_training_advances(local_ray, tmp_path):
+    cfg = _cfg()
+    trainer = Trainer(cfg, tmp_path)
+    backend = RayBackend(
+        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    try:
+        assert backend.num_actors == 2 and backend.steps == 32  # 256 / (2 actors x 4 envs)
+        frags = backend.collect(trainer.learner.weights(), trainer.learner.version)
+        assert len(frags) == 2
+        for f in frags:
+            assert f.obs.shape == (32, 4, trainer.obs_dim)
+            assert f.actions.shape == (32, 4, trainer.act_dim)
+            assert f.rewards.shape == f.dphi.shape == f.terminated.shape == (32, 4)
+            assert f.policy_version == 0
+        assert {e.episode_id.split("-")[0] for f in frags for e in f.episodes} <= {"w0", "w1"}
+        trainer.train(backend, total_steps=3 * 256)
+        assert trainer.progress.iteration == 3
+        assert trainer.progress.env_steps == 3 * 256
+        assert backend.stats()["actor_restarts"] == 0
+    finally:
+        backend.close()
+
+
+def test_killed_actor_is_restarted_and_the_run_finishes(local_ray, tmp_path):
+    cfg = _cfg(steps_per_fragment=150)  # fragments long enough to be killed in the middle
+    trainer = Trainer(cfg, tmp_path)
+    backend = RayBackend(
+        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    victim = backend.pids()[0]
+    first_done = threading.Event()
+    metrics = []
+
+    def on_metrics(m):
+        metrics.append(m)
+        first_done.set()
+
+    errors = []
+
+    def run():
+        try:
+            trainer.train(backend, total_steps=4 * 2 * 4 * 150, on_metrics=on_metrics)
+        except Exception as e:  # surfaced by the assertion below
+            errors.append(e)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    try:
+        assert first_done.wait(timeout=300)
+        threading.Event().wait(0.5)  # the actors are now in the middle of the next fragment
+        os.kill(victim, signal.SIGKILL)
+        thread.join(timeout=600)
+        assert not thread.is_alive() and not errors, errors
+        assert trainer.progress.env_steps >= 4 * 2 * 4 * 150  # every iteration ran
+        assert backend.stats()["actor_restarts"] == 1
+        assert metrics[-1]["actor_restarts"] == 1
+        assert victim not in backend.pids()  # a new process took the actor's place
+    finally:
+        backend.close()
+
+
+def test_resume_restores_identical_state(local_ray, tmp_path):
+    cfg = _cfg()
+    first = Trainer(cfg, tmp_path)
+    backend = RayBackend(
+        cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    try:
+        first.train(backend, total_steps=2 * 256)
+    finally:
+        backend.close()
+    second = Trainer(cfg, tmp_path)
+    second.load_state_dict(checkpoint.load(tmp_path))
+    a, b = first.learner.state_dict(), second.learner.state_dict()
+    for k in a["policy"]:
+        assert a["policy"][k].numpy().tobytes() == b["policy"][k].numpy().tobytes()
+    for group in ("policy_opt", "value_opt"):
+        for sid, st in a[group]["state"].items():
+            for name, t in st.items():
+                assert t.numpy().tobytes() == b[group]["state"][sid][name].numpy().tobytes()
+    np.testing.assert_array_equal(a["normalizer"]["mean"], b["normalizer"]["mean"])
+    assert second.progress.iteration == 2
+    assert second.sampler.to_state() == first.sampler.to_state()
+
+
+def test_serial_and_ray_give_the_same_fragments(local_ray, tmp_path):
+    cfg = _cfg(num_actors=1)
+    a = Trainer(cfg, tmp_path / "serial")
+    b = Trainer(cfg, tmp_path / "ray")
+    b.learner.policy.load_state_dict(a.learner.policy.state_dict())
+    serial = SerialBackend(cfg, a.obs_dim, a.act_dim, a.sampler.next_tasks)
+    remote = RayBackend(cfg, b.obs_dim, b.act_dim, b.sampler.next_tasks, cfg.ppo.num_steps)
+    try:
+        for _ in range(2):
+            [fs] = serial.collect(a.learner.weights(), 0)
+            [fr] = remote.collect(b.learner.weights(), 0)
+            for name in (
+                "obs",
+                "actions",
+                "logp",
+                "values",
+                "next_values",
+                "rewards",
+                "terminated",
+                "truncated",
+                "task_index",
+                "tasks",
+            ):
+                np.testing.assert_array_equal(getattr(fs, name), getattr(fr, name), name)
+            assert [e.to_dict() for e in fs.episodes] == [e.to_dict() for e in fr.episodes]
+    finally:
+        remote.close()
