@@ -1,4 +1,4 @@
-# Quick start: `make train` trains the default config; `make test` runs the suite.
+# Quick start: `make train` trains the default config (local Ray); `make test` runs the suite.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -19,7 +19,7 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 	touch $@
 
 train: $(VENV)/.installed
-	$(BIN)/paramimic train $(CONFIG) --serial
+	$(BIN)/paramimic train $(CONFIG)
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check paramimic services tests benchmarks

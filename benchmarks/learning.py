@@ -238,22 +238,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("stage", choices=[*STAGES, "all", "merge"])
     ap.add_argument("--steps", type=int, default=1_000_000)
+    ap.add_argument("--seed", type=int, default=0, help="seed of a single stage")
+    ap.add_argument("--seeds", default="0", help="comma-separated seeds for `all`")
     ap.add_argument("--parallel", type=int, default=2)
     args = ap.parse_args()
-    if args.stage == "merge":
-        pass
-    elif args.stage == "all":
+    if args.stage == "all":
+        jobs = [(stage, int(seed)) for seed in args.seeds.split(",") for stage in STAGES]
 
-        def sub(stage: str) -> int:
-            return subprocess.call([sys.executable, __file__, stage, "--steps", str(args.steps)])
+        def sub(job: tuple[str, int]) -> int:
+            stage, seed = job
+            cmd = [sys.executable, __file__, stage, "--steps", str(args.steps), "--seed", str(seed)]
+            return subprocess.call(cmd)
 
         with ThreadPoolExecutor(args.parallel) as pool:
-            codes = list(pool.map(sub, STAGES))
+            codes = list(pool.map(sub, jobs))
         if any(codes):
-            raise SystemExit(f"stage exit codes: {dict(zip(STAGES, codes, strict=True))}")
-    else:
-        run_stage(args.stage, args.steps)
-    print(json.dumps({k: v for k, v in merge().items() if k != "stages"}, indent=2))
+            raise SystemExit(f"stage exit codes: {dict(zip(jobs, codes, strict=True))}")
+    elif args.stage != "merge":
+        run_stage(args.stage, args.steps, args.seed)
+    print(json.dumps({k: v for k, v in merge().items() if k != "runs"}, indent=2))
 
 
 if __name__ == "__main__":

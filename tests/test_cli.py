@@ -97,3 +97,14 @@ def test_ctrl_c_checkpoints_and_exits(tmp_path):
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 0, out
     assert (run / "checkpoints" / "latest.pt").is_file()
+
+
+def test_train_without_serial_runs_on_a_local_ray(tmp_path):
+    cfg = tmp_path / "tiny.yaml"
+    cfg.write_text(yaml.safe_dump({**TINY, "actors": {"num_actors": 1, "num_envs": 4}}))
+    run = tmp_path / "run"
+    res = _cli("train", cfg, "--run-dir", run, env={**os.environ, "RAY_ADDRESS": ""})
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "Ray: 1 rollout actors x 4 envs" in res.stdout
+    last = json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])
+    assert last["iteration"] == 2 and last["actors"] == 1 and last["actor_restarts"] == 0

@@ -148,3 +148,42 @@ def test_serial_and_ray_give_the_same_fragments(local_ray, tmp_path):
             assert [e.to_dict() for e in fs.episodes] == [e.to_dict() for e in fr.episodes]
     finally:
         remote.close()
+
+
+def test_pipelined_mode_samples_during_the_update(local_ray, tmp_path):
+    cfg = _cfg(mode="pipelined")
+    trainer = Trainer(cfg, tmp_path)
+    backend = RayBackend(
+        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    metrics = []
+    try:
+        trainer.train(backend, total_steps=4 * 256, on_metrics=metrics.append)
+    finally:
+        backend.close()
+    assert [m["policy_lag"] for m in metrics] == [0.0, 1.0, 1.0, 1.0]  # one version behind
+
+
+def test_auto_sizes_the_pool_from_the_cluster_cpus(local_ray):
+    from services.learner.ray_backend import resolve_num_actors
+
+    assert resolve_num_actors("auto") == 2  # 3 CPUs, one left for the learner
+    assert resolve_num_actors(5) == 5
+
+
+def test_all_actors_gone_raises_after_the_timeout(local_ray, tmp_path):
+    from services.learner.ray_backend import AllActorsLost
+
+    cfg = _cfg(lost_timeout=2.0)
+    trainer = Trainer(cfg, tmp_path)
+    backend = RayBackend(
+        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    for actor in backend.actors:
+        ray.kill(actor, no_restart=True)
+    try:
+        with pytest.raises(AllActorsLost, match="no rollout actor delivered"):
+            trainer.train(backend, total_steps=10**6)
+    finally:
+        backend.close()
+    assert checkpoint.load(tmp_path)["progress"]["iteration"] == 0  # checkpointed on the way out

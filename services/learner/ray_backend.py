@@ -27,6 +27,8 @@ from paramimic.config import ExperimentConfig
 from paramimic.rl.rollout import Fragment, tasks_per_fragment
 from services.actors.rollout_actor import RolloutActor
 
+RETRY_PAUSE = 0.2  # seconds before asking a failed actor again
+
 
 class AllActorsLost(RuntimeError):
     pass
@@ -111,6 +113,7 @@ class RayBackend:
                     self.failing.add(i)
                 self.dropped += 1
                 lost_since = lost_since or time.monotonic()
+                time.sleep(RETRY_PAUSE)  # do not spin on an actor that keeps failing
                 self._request(i)
                 continue
             self.failing.discard(i)
