@@ -9,6 +9,8 @@ Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs
   evaluated by the same episode runner, tasks and seeds.
 - `legs_k0`, `legs_k10`: configs/walker_legs.yaml with curriculum.k = 0 and 10 at equal budget;
   fall % over 300 random shapes, worst-decile return, uniformity over random shapes and the grid.
+- `ray_sync_base`, `ray_pipelined_base` (not part of `all`): walker_base trained on a local Ray
+  with 2 actors x 8 envs in sync and in pipelined mode, to compare their learning.
 
     pip install -e ".[bench]"; python benchmarks/learning.py all [--steps 1000000] [--seeds 0,1,2]
     python benchmarks/learning.py ours_base --seed 1     # one stage
@@ -32,11 +34,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 STAGES = ("ours_base", "sb3_base", "legs_k0", "legs_k10")
+RAY_STAGES = ("ray_sync_base", "ray_pipelined_base")  # 2 actors x 8 envs on a local Ray
 EVAL_EPISODES = int(__import__("os").environ.get("EVAL_EPISODES", 300))
 EVAL_SEED = 2024
 
 
-def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path, seed: int) -> dict:
+def _train_ours(
+    config: str, steps: int, overrides: dict, run_dir: Path, seed: int, on_ray: bool = False
+) -> dict:
     import torch
 
     from paramimic.config import load_config
@@ -50,9 +55,24 @@ def _train_ours(config: str, steps: int, overrides: dict, run_dir: Path, seed: i
     torch.manual_seed(cfg.train.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, run_dir)
-    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    if on_ray:
+        import ray
+
+        from services.learner.ray_backend import RayBackend
+
+        ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+        backend = RayBackend(
+            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+        )
+    else:
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     t0 = time.perf_counter()
-    trainer.train(backend, steps)
+    try:
+        trainer.train(backend, steps)
+    finally:
+        backend.close()
+        if on_ray:
+            ray.shutdown()
     train_seconds = time.perf_counter() - t0
     report = evaluate(
         deterministic(trainer.learner.policy),
@@ -164,8 +184,12 @@ def run_stage(stage: str, steps: int, seed: int) -> dict:
     elif stage in ("legs_k0", "legs_k10"):
         k = 0.0 if stage == "legs_k0" else 10.0
         report = _train_ours("configs/walker_legs.yaml", steps, {"curriculum.k": k}, run_dir, seed)
+    elif stage in ("ray_sync_base", "ray_pipelined_base"):
+        mode = "sync" if stage == "ray_sync_base" else "pipelined"
+        overrides = {"actors.mode": mode, "actors.num_actors": 2, "actors.num_envs": 8}
+        report = _train_ours("configs/walker_base.yaml", steps, overrides, run_dir, seed, True)
     else:
-        raise SystemExit(f"unknown stage {stage}; stages: {STAGES}")
+        raise SystemExit(f"unknown stage {stage}; stages: {STAGES + RAY_STAGES}")
     report.update({"stage": stage, "seed": seed})
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / f"learning_{stage}_s{seed}.json").write_text(json.dumps(report, indent=2))
@@ -199,6 +223,16 @@ def merge() -> dict:
             "speed_within_25pc": abs(speed - target) / target <= 0.25,
             "ours_train_seconds": _mean(ours, "train_seconds"),
             "sb3_train_seconds": _mean(sb3, "train_seconds"),
+        }
+    if {"ray_sync_base", "ray_pipelined_base"} <= runs.keys():
+        summary["ray_modes"] = {
+            k: {
+                "mean_return": _mean(runs[k], "mean_return"),
+                "fall_percent": _mean(runs[k], "fall_percent"),
+                "train_seconds": _mean(runs[k], "train_seconds"),
+                "steps_per_second": _mean(runs[k], "env_steps") / _mean(runs[k], "train_seconds"),
+            }
+            for k in ("ray_sync_base", "ray_pipelined_base")
         }
     for k in ("legs_k0", "legs_k10"):
         if k in runs:
@@ -236,7 +270,7 @@ def _brief(r: dict) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("stage", choices=[*STAGES, "all", "merge"])
+    ap.add_argument("stage", choices=[*STAGES, *RAY_STAGES, "all", "merge"])
     ap.add_argument("--steps", type=int, default=1_000_000)
     ap.add_argument("--seed", type=int, default=0, help="seed of a single stage")
     ap.add_argument("--seeds", default="0", help="comma-separated seeds for `all`")
