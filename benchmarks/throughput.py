@@ -1,12 +1,16 @@
-"""End-to-end throughput, side by side in one run ([DESIGN] "How we know it works").
+"""Throughput on the walker, in one run (issue: Part 2 benchmark). Not a timed test.
 
-Env steps/s of: raw MuJoCo stepping of the same model (the ceiling, one core), the serial
-trainer (rollouts + PPO update in one process), and the Ray trainer with 1 actor and with N
-actors, each in sync and pipelined mode. Every trainer row runs the same config for the same
-number of iterations after one warm-up iteration (actor start-up excluded).
-Writes benchmarks/results/throughput.json.
+(a) raw `mj_step` loop of the same model and frame skip, control steps/s (the ceiling);
+(b) one rollout actor stepping its envs without a policy (zero actions);
+(c) one actor with the policy (batched forward per step);
+(d) two actors sampling at once;
+(e) end-to-end training (sampling + PPO updates) on Ray, sync and pipelined;
+(f) Stable-Baselines3 PPO on the same gymnasium env with 2 envs (SubprocVecEnv), with SB3's
+    defaults and with our n_steps / minibatch / epochs.
+Also the peak RSS of an actor and of the learner. Writes benchmarks/results/throughput.json
+and prints a table.
 
-    python benchmarks/throughput.py [--config configs/walker_base.yaml] [--iterations 8]
+    pip install -e ".[bench]"; python benchmarks/throughput.py [--iterations 6]
 """
 
 from __future__ import annotations
@@ -14,24 +18,27 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import tempfile
 import time
 import warnings
 from pathlib import Path
 
 import mujoco
+import numpy as np
 import ray
 
-from paramimic.config import load_config
+from paramimic.config import ExperimentConfig, load_config
 from paramimic.envs import make_env
 from services.learner.ray_backend import RayBackend
-from services.learner.trainer import SerialBackend, Trainer
+from services.learner.trainer import Trainer
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def raw_steps_per_s(cfg, steps: int = 3000) -> float:
+def raw_steps_per_s(cfg: ExperimentConfig, steps: int = 4000) -> float:
+    """(a) one MjData, the env's PD targets held, mj_step(nstep=frame_skip) per control step."""
     env = make_env(cfg.character, cfg.task, cfg.env)
     env.reset(seed=0)
     m, d = env.model, env.data
@@ -43,22 +50,50 @@ def raw_steps_per_s(cfg, steps: int = 3000) -> float:
     return steps / (time.perf_counter() - t)
 
 
-def trainer_steps_per_s(cfg, backend_kind: str, iterations: int, **actors) -> dict:
+def actor_steps_per_s(cfg, trainer, n_actors: int, use_policy: bool, rounds: int) -> dict:
+    """(b)-(d): fragments from n actors at once, after one warm-up fragment each."""
     cfg = cfg.model_copy(deep=True)
-    for k, v in actors.items():
-        setattr(cfg.actors, k, v)
+    cfg.actors.num_actors = n_actors
+    backend = RayBackend(
+        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+    )
+    try:
+        weights = [ray.put(trainer.learner.weights())]
+
+        def round_trip() -> int:
+            refs = [
+                a.sample.remote(
+                    weights,
+                    0,
+                    backend.steps,
+                    trainer.sampler.next_tasks(backend.n_tasks),
+                    use_policy,
+                )
+                for a in backend.actors
+            ]
+            return sum(f.num_steps for f in ray.get(refs))
+
+        round_trip()
+        t = time.perf_counter()
+        steps = sum(round_trip() for _ in range(rounds))
+        dt = time.perf_counter() - t
+        rss = ray.get([a.peak_rss_mb.remote() for a in backend.actors])
+    finally:
+        backend.close()
+    return {"steps_per_s": steps / dt, "actors": n_actors, "peak_rss_mb_per_actor": max(rss)}
+
+
+def training_steps_per_s(cfg, mode: str, iterations: int) -> dict:
+    """(e): whole iterations of the trainer on Ray, after one warm-up iteration."""
+    cfg = cfg.model_copy(deep=True)
+    cfg.actors.mode = mode
     with tempfile.TemporaryDirectory() as tmp:
         trainer = Trainer(cfg, Path(tmp))
-        if backend_kind == "serial":
-            backend = SerialBackend(
-                cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks
-            )
-        else:
-            backend = RayBackend(
-                cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-            )
+        backend = RayBackend(
+            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
+        )
         try:
-            trainer.iteration(backend)  # warm-up: actor start, first weights
+            trainer.iteration(backend)
             steps0 = trainer.progress.env_steps
             t = time.perf_counter()
             for _ in range(iterations):
@@ -66,50 +101,115 @@ def trainer_steps_per_s(cfg, backend_kind: str, iterations: int, **actors) -> di
             dt = time.perf_counter() - t
         finally:
             backend.close()
-        return {
-            "steps_per_s": (trainer.progress.env_steps - steps0) / dt,
-            "iterations": iterations,
-            "seconds": dt,
-            "actors": getattr(backend, "num_actors", 0),
-            **actors,
+    return {
+        "steps_per_s": (trainer.progress.env_steps - steps0) / dt,
+        "mode": mode,
+        "actors": backend.num_actors,
+        "iterations": iterations,
+    }
+
+
+def sb3_steps_per_s(cfg, ours: bool, steps: int) -> dict:
+    """(f) SB3 PPO, 2 envs in subprocesses, end-to-end learn() rate."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    import paramimic.envs  # noqa: F401
+
+    torch.set_num_threads(1)
+    venv = make_vec_env(
+        lambda: gym.make("paramimic/Walker-v0", config=cfg.env.model_dump()),
+        n_envs=2,
+        vec_env_cls=SubprocVecEnv,
+    )
+    kwargs: dict = {}
+    if ours:
+        p = cfg.ppo
+        kwargs = {
+            "n_steps": p.num_steps // 2,
+            "batch_size": p.minibatch_size,
+            "n_epochs": p.num_epochs,
         }
+    model = PPO("MlpPolicy", venv, device="cpu", seed=0, verbose=0, **kwargs)
+    model.learn(total_timesteps=model.n_steps * 2)  # warm-up: one rollout and one update
+    t = time.perf_counter()
+    model.learn(total_timesteps=steps, reset_num_timesteps=False)
+    dt = time.perf_counter() - t
+    venv.close()
+    return {
+        "steps_per_s": steps / dt,
+        "hyperparameters": "ours" if ours else "sb3 defaults",
+        "n_steps_per_env": model.n_steps,
+        "batch_size": model.batch_size,
+        "n_epochs": model.n_epochs,
+    }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", default="configs/walker_base.yaml")
-    ap.add_argument("--iterations", type=int, default=8)
+    ap.add_argument("--iterations", type=int, default=6)
+    ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--sb3-steps", type=int, default=3 * 8192)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/throughput.json")
     args = ap.parse_args()
-    cfg = load_config(ROOT / args.config)
-    cpus = os.cpu_count() or 1
-    n = max(1, cpus)
-    rows = {"raw_mj_step_one_core": {"steps_per_s": raw_steps_per_s(cfg)}}
-    rows["serial"] = trainer_steps_per_s(cfg, "serial", args.iterations)
+    cfg = load_config(ROOT / args.config, {"actors.num_actors": 2})
+    rows: dict[str, dict] = {"a_raw_mj_step": {"steps_per_s": raw_steps_per_s(cfg)}}
     ray.init(
-        num_cpus=cpus, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False
+        num_cpus=os.cpu_count(),
+        include_dashboard=False,
+        _node_ip_address="127.0.0.1",
+        log_to_driver=False,
     )
     try:
+        with tempfile.TemporaryDirectory() as tmp:
+            trainer = Trainer(cfg, Path(tmp))
+            rows["b_1_actor_no_policy"] = actor_steps_per_s(cfg, trainer, 1, False, args.rounds)
+            rows["c_1_actor_policy"] = actor_steps_per_s(cfg, trainer, 1, True, args.rounds)
+            rows["d_2_actors_policy"] = actor_steps_per_s(cfg, trainer, 2, True, args.rounds)
         for mode in ("sync", "pipelined"):
-            rows[f"ray_1_actor_{mode}"] = trainer_steps_per_s(
-                cfg, "ray", args.iterations, num_actors=1, mode=mode
-            )
-            rows[f"ray_{n}_actors_{mode}"] = trainer_steps_per_s(
-                cfg, "ray", args.iterations, num_actors=n, mode=mode
-            )
+            rows[f"e_training_{mode}"] = training_steps_per_s(cfg, mode, args.iterations)
     finally:
         ray.shutdown()
+    rows["learner_peak_rss_mb"] = {
+        "value": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    }
+    rows["f_sb3_defaults"] = sb3_steps_per_s(cfg, ours=False, steps=args.sb3_steps)
+    rows["f_sb3_our_hyperparameters"] = sb3_steps_per_s(cfg, ours=True, steps=args.sb3_steps)
+    a, c = rows["a_raw_mj_step"]["steps_per_s"], rows["c_1_actor_policy"]["steps_per_s"]
+    e = max(rows["e_training_sync"]["steps_per_s"], rows["e_training_pipelined"]["steps_per_s"])
+    ratios = {
+        "c_over_a (target >= 0.85)": c / a,
+        "b_over_a": rows["b_1_actor_no_policy"]["steps_per_s"] / a,
+        "d_over_c (target >= 1.8)": rows["d_2_actors_policy"]["steps_per_s"] / c,
+        "e_best_over_sb3_defaults (target >= 3)": e / rows["f_sb3_defaults"]["steps_per_s"],
+        "e_best_over_sb3_our_hyperparameters": e / rows["f_sb3_our_hyperparameters"]["steps_per_s"],
+        "pipelined_over_sync": rows["e_training_pipelined"]["steps_per_s"]
+        / rows["e_training_sync"]["steps_per_s"],
+        "actor_peak_rss_mb (target < 400)": rows["d_2_actors_policy"]["peak_rss_mb_per_actor"],
+    }
     result = {
         "config": args.config,
-        "cpus": cpus,
+        "cpus": os.cpu_count(),
         "num_envs": cfg.actors.num_envs,
         "ppo_num_steps": cfg.ppo.num_steps,
         "rows": rows,
+        "ratios": ratios,
+        "numpy": np.__version__,
+        "mujoco": mujoco.__version__,
+        "ray": ray.__version__,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2))
     for name, r in rows.items():
-        print(f"{name:28s} {r['steps_per_s']:8.0f} env steps/s")
+        value = r.get("steps_per_s", r.get("value"))
+        unit = "MB" if "rss" in name else "steps/s"
+        print(f"{name:30s} {value:10.0f} {unit}")
+    for name, v in ratios.items():
+        print(f"{name:45s} {v:8.2f}")
     print(f"wrote {args.out}")
 
 

@@ -142,8 +142,14 @@ class RolloutWorker:
         )
 
     @torch.no_grad()
-    def collect(self, num_steps: int, tasks: np.ndarray | None = None) -> Fragment:
-        """Step all envs `num_steps` times; episodes that start take `tasks` in order if given."""
+    def collect(
+        self, num_steps: int, tasks: np.ndarray | None = None, use_policy: bool = True
+    ) -> Fragment:
+        """Step all envs `num_steps` times; episodes that start take `tasks` in order if given.
+
+        `use_policy=False` steps with zero actions (the reference motion's PD targets) and no
+        forward pass: the cost of the environments alone, for throughput measurements.
+        """
         if tasks is not None:
             self.task_source = TaskQueue(tasks)
         if self._obs is None:
@@ -168,9 +174,14 @@ class RolloutWorker:
         final_obs: list[tuple[int, int, np.ndarray]] = []
         episodes: list[EpisodeSummary] = []
         obs = self._obs
+        zero_actions = np.zeros((m, act_dim), np.float32)
+        zero_m = np.zeros(m, np.float32)
         for t in range(T):
-            noise = self.rng.standard_normal((m, act_dim))
-            actions, logp, values = self.policy.act(obs, noise)
+            if use_policy:
+                noise = self.rng.standard_normal((m, act_dim))
+                actions, logp, values = self.policy.act(obs, noise)
+            else:
+                actions, logp, values = zero_actions, zero_m, zero_m
             obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs, actions, logp, values
             task_index[t] = current
             next_obs = np.empty_like(obs)

@@ -8,6 +8,7 @@ episode inside the env; nothing here can kill the actor but the process dying.
 from __future__ import annotations
 
 import os
+import resource
 
 import numpy as np
 import ray
@@ -40,11 +41,19 @@ class RolloutActor:
     def pid(self) -> int:
         return os.getpid()
 
+    def peak_rss_mb(self) -> float:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
     def sample(
-        self, weights: list[ray.ObjectRef], version: int, num_steps: int, tasks: np.ndarray
+        self,
+        weights: list[ray.ObjectRef],
+        version: int,
+        num_steps: int,
+        tasks: np.ndarray,
+        use_policy: bool = True,
     ) -> Fragment:
         """One fragment. `weights` is a one-element list so that Ray does not fetch the
         (unchanged) weights on every call: they are read only when `version` is new."""
         if version != self.worker.policy_version:
             self.worker.set_weights(ray.get(weights[0]), version)
-        return self.worker.collect(num_steps, tasks)
+        return self.worker.collect(num_steps, tasks, use_policy)
