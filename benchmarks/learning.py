@@ -235,19 +235,22 @@ def merge() -> dict:
             for k in ("ray_sync_base", "ray_pipelined_base")
         }
     for k in ("legs_k0", "legs_k10"):
-        if k in runs:
-            summary.setdefault("walker_legs", {})[k] = {
-                "seeds": [r["seed"] for r in runs[k]],
-                "fall_percent": _mean(runs[k], "fall_percent"),
-                "worst_decile_return": _mean(runs[k], "worst_decile_return"),
-                "mean_return": _mean(runs[k], "mean_return"),
+        by_budget: dict[int, list[dict]] = {}
+        for r in runs.get(k, []):  # runs of different budgets are compared, never averaged
+            by_budget.setdefault(round(r["env_steps"] / 1e6), []).append(r)
+        for millions, group in sorted(by_budget.items()):
+            summary.setdefault("walker_legs", {})[f"{k}_{millions}M_steps"] = {
+                "seeds": [r["seed"] for r in group],
+                "fall_percent": _mean(group, "fall_percent"),
+                "worst_decile_return": _mean(group, "worst_decile_return"),
+                "mean_return": _mean(group, "mean_return"),
                 "uniformity_min_over_mean": float(
-                    np.mean([r["uniformity"]["min_over_mean"] for r in runs[k]])
+                    np.mean([r["uniformity"]["min_over_mean"] for r in group])
                 ),
                 "uniformity_cv": float(
-                    np.mean([r["uniformity"]["coefficient_of_variation"] for r in runs[k]])
+                    np.mean([r["uniformity"]["coefficient_of_variation"] for r in group])
                 ),
-                "grid_uniformity": [r.get("grid", {}).get("uniformity") for r in runs[k]],
+                "grid_uniformity": [r.get("grid", {}).get("uniformity") for r in group],
             }
     (RESULTS / "learning.json").write_text(json.dumps(summary, indent=2))
     return summary

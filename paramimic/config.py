@@ -109,7 +109,7 @@ class ActorsConfig(Section):
     """Rollout workers: in-process for --serial, Ray actors otherwise."""
 
     num_actors: int | Literal["auto"] = Field(
-        "auto", description="N Ray rollout actors; auto = the cluster's CPUs minus one (min 1)"
+        "auto", description="N Ray rollout actors; auto = one per CPU of the cluster"
     )
     num_envs: int = Field(16, ge=1, description="M, environments stepped together per worker")
     steps_per_fragment: int | None = Field(

@@ -14,7 +14,7 @@ import numpy as np
 
 from paramimic.curriculum.task_space import TaskSpace
 from paramimic.envs import ParamEnv
-from paramimic.rl.networks import ActorCritic
+from paramimic.rl.networks import ActorCritic, NumpyPolicy
 
 
 @dataclass
@@ -33,7 +33,8 @@ Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n,
 
 def deterministic(policy: ActorCritic) -> Act:
     """The policy's mean action."""
-    return lambda obs: policy.act(obs, None)[0]
+    fast = NumpyPolicy(policy)
+    return lambda obs: fast.act(obs, None)[0]
 
 
 def run_episodes(

@@ -33,3 +33,23 @@ def test_running_mean_std_matches_batch_statistics():
     np.testing.assert_allclose(rms.mean, x.mean(axis=0))
     np.testing.assert_allclose(rms.var, x.var(axis=0))
     assert rms.count == 1000
+
+
+def test_numpy_policy_is_the_same_function_as_the_torch_one():
+    import torch
+
+    from paramimic.rl.networks import ActorCritic, NumpyPolicy
+
+    torch.manual_seed(0)
+    policy = ActorCritic(11, 3, (32, 32), init_log_std=-0.7)
+    stats = RunningMeanStd(11)
+    stats.update(np.random.default_rng(0).normal(2.0, 3.0, (100, 11)))
+    policy.set_normalizer(stats)
+    fast = NumpyPolicy(policy)
+    rng = np.random.default_rng(1)
+    obs = rng.normal(0, 5, (7, 11)).astype(np.float32)
+    noise = rng.standard_normal((7, 3))
+    for n in (noise, None):
+        for a, b in zip(policy.act(obs, n), fast.act(obs, n), strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(policy.value(obs), fast.value(obs), rtol=1e-5, atol=1e-5)

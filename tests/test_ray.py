@@ -167,7 +167,7 @@ def test_pipelined_mode_samples_during_the_update(local_ray, tmp_path):
 def test_auto_sizes_the_pool_from_the_cluster_cpus(local_ray):
     from services.learner.ray_backend import resolve_num_actors
 
-    assert resolve_num_actors("auto") == 2  # 3 CPUs, one left for the learner
+    assert resolve_num_actors("auto") == 3  # one per CPU of the cluster
     assert resolve_num_actors(5) == 5
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from paramimic.envs import REWARD_TERMS, ParamEnv
-from paramimic.rl.networks import ActorCritic
+from paramimic.rl.networks import ActorCritic, NumpyPolicy
 
 TaskSource = Callable[[int], np.ndarray]  # n -> [n, d] task parameters
 
@@ -100,6 +100,7 @@ class RolloutWorker:
         self.envs = [make_env() for _ in range(num_envs)]
         self.policy = ActorCritic(obs_dim, act_dim, hidden, init_log_std=0.0)
         self.policy.eval()
+        self.fast_policy = NumpyPolicy(self.policy)
         self.policy_version = -1
         self.rng = np.random.default_rng(seed)
         self.worker_id = worker_id
@@ -114,6 +115,7 @@ class RolloutWorker:
     def set_weights(self, weights: dict[str, torch.Tensor], version: int) -> None:
         if version != self.policy_version:
             self.policy.load_state_dict(weights)
+            self.fast_policy = NumpyPolicy(self.policy)
             self.policy_version = version
 
     def _tasks(self, n: int) -> np.ndarray | None:
@@ -141,7 +143,6 @@ class RolloutWorker:
             [self._start(i, None if tasks is None else tasks[i], int(seeds[i])) for i in range(m)]
         )
 
-    @torch.no_grad()
     def collect(
         self, num_steps: int, tasks: np.ndarray | None = None, use_policy: bool = True
     ) -> Fragment:
@@ -179,30 +180,23 @@ class RolloutWorker:
         for t in range(T):
             if use_policy:
                 noise = self.rng.standard_normal((m, act_dim))
-                actions, logp, values = self.policy.act(obs, noise)
+                actions, logp, values = self.fast_policy.act(obs, noise)
             else:
                 actions, logp, values = zero_actions, zero_m, zero_m
             obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs, actions, logp, values
             task_index[t] = current
-            next_obs = np.empty_like(obs)
+            results = [env.step(a) for env, a in zip(envs, actions, strict=True)]
             ended = []
-            for i in range(m):
-                o, r, te, tr, info = envs[i].step(actions[i])
+            for i, (_, r, te, tr, info) in enumerate(results):
                 ep = self._ep[i]
                 ep["ret"] += r
                 ep["len"] += 1
                 terms = ep["terms"]
                 for k, v in info["reward_terms"].items():
                     terms[k] += v
-                rew[t, i] = r - info["reward_spike"]
-                spike[t, i] = info["reward_spike"]
-                dphi[t, i] = info["dphi"]
-                term[t, i] = te
-                trunc[t, i] = tr
-                next_obs[i] = o
                 if te or tr:
                     if tr:
-                        final_obs.append((t, i, o))
+                        final_obs.append((t, i, results[i][0]))
                     self.diverged_episodes += int(info["diverged"])
                     episodes.append(
                         EpisodeSummary(
@@ -212,10 +206,18 @@ class RolloutWorker:
                             ep["len"],
                             bool(info["fell"]),
                             bool(info["diverged"]),
-                            ep["terms"],
+                            terms,
                         )
                     )
                     ended.append(i)
+            obs_list, r_list, te_list, tr_list, infos = zip(*results, strict=True)
+            spikes = [info["reward_spike"] for info in infos]
+            spike[t] = spikes
+            rew[t] = np.subtract(r_list, spikes)  # continuous part of the reward
+            dphi[t] = [info["dphi"] for info in infos]
+            term[t] = te_list
+            trunc[t] = tr_list
+            next_obs = np.stack(obs_list)
             if ended:
                 new_tasks = self._tasks(len(ended))
                 for j, i in enumerate(ended):
@@ -226,9 +228,9 @@ class RolloutWorker:
         self._obs = obs
         next_values = np.empty_like(val_buf)
         next_values[:-1] = val_buf[1:]
-        next_values[-1] = self.policy.value(obs)
+        next_values[-1] = self.fast_policy.value(obs)
         if final_obs:
-            vals = self.policy.value(np.stack([o for _, _, o in final_obs]))
+            vals = self.fast_policy.value(np.stack([o for _, _, o in final_obs]))
             for (t, i, _), v in zip(final_obs, vals, strict=True):
                 next_values[t, i] = v
         return Fragment(

@@ -37,7 +37,9 @@ class AllActorsLost(RuntimeError):
 def resolve_num_actors(setting: int | str) -> int:
     if setting != "auto":
         return int(setting)
-    return max(1, int(ray.cluster_resources().get("CPU", 1)) - 1)
+    # One actor per CPU: Ray runs its workers at a lower priority than the learner, so the PPO
+    # update still gets a core when it needs one (measured in benchmarks/throughput.py).
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
 
 
 class RayBackend:
