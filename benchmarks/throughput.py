@@ -92,6 +92,7 @@ def training_steps_per_s(cfg, mode: str, iterations: int) -> dict:
         backend = RayBackend(
             cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
         )
+        actors = backend.num_actors
         try:
             trainer.iteration(backend)
             steps0 = trainer.progress.env_steps
@@ -104,7 +105,7 @@ def training_steps_per_s(cfg, mode: str, iterations: int) -> dict:
     return {
         "steps_per_s": (trainer.progress.env_steps - steps0) / dt,
         "mode": mode,
-        "actors": backend.num_actors,
+        "actors": actors,
         "iterations": iterations,
     }
 
