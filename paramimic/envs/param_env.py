@@ -32,7 +32,7 @@ SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 INSTABILITY = slice(
     int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQACC) + 1
 )
-MAX_JOINT_SPEED = 100.0  # rad/s: an RMS joint speed above this is a diverged simulation
+MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
 
 
 @lru_cache(maxsize=32)
@@ -111,7 +111,10 @@ class ParamEnv(gym.Env):
         self._opt = c.model.opt
         self.data = mujoco.MjData(c.model)
         self._fall_height = self.config.fall_height_ratio * c.hip_height
+        self._max_qvel_sq = c.model.nv * MAX_SPEED**2
         self._reference = self._tabulate_reference() if self.motion is not None else None
+        if self._reference is not None:  # rows as a list: indexing it is cheaper per step
+            self._reference_rows = (list(self._reference[0]), list(self._reference[1]))
 
     def _layout(self) -> None:
         """Index and weight arrays of the reward and observation; the same for every shape."""
@@ -145,31 +148,29 @@ class ParamEnv(gym.Env):
         )
         dims = np.array([nj, nj, *[3] * n_ee, nj, 2, 2], dtype=np.float64)
         w = w / w.sum()  # every step's reward lies in (0, 1]
-        self._weights = w
-        self._neg_inv_sigma_dim = -1.0 / (sigma * dims)
-        self._err = np.zeros(len(w))
-        # squared joint-velocity error of the reward beyond which the state counts as diverged
-        self._max_velocity_err = nj * MAX_JOINT_SPEED**2
+        exponent = -1.0 / (sigma * dims)  # bell = exp(‖x‖² · exponent) = exp(-‖x‖²_D / σ)
         self._nj = nj
-        self._block = slice(0, c.tau_sensor.stop)  # q, dq, ee, tau: one sensordata block
-        # squared block entries -> ‖x‖² per bell; torques are scaled by their limits first
+        # The sensordata block q, dq, ee, τ: squared entries -> exponent of each of its bells
+        # (torques relative to their limits), one matrix product per step.
+        self._block = slice(0, c.tau_sensor.stop)
         groups = [0] * nj + [1] * nj + [2 + i for i in range(n_ee) for _ in range(3)]
         groups += [2 + n_ee] * nj
-        self._n_block_bells = len(w) - 2
-        sum_matrix = np.zeros((len(groups), self._n_block_bells))
-        sum_matrix[np.arange(len(groups)), groups] = 1.0
-        self._sum_matrix = sum_matrix
-        self._block_scale = np.concatenate([np.ones(2 * nj + 3 * n_ee), 1.0 / c.torque_limit])
+        nb = 3 + n_ee
+        scale_sq = np.concatenate([np.ones(2 * nj + 3 * n_ee), 1.0 / c.torque_limit**2])
+        block_exponent = np.zeros((len(groups), nb))
+        block_exponent[np.arange(len(groups)), groups] = scale_sq * exponent[groups]
+        self._block_exponent = block_exponent
+        self._w_block = w[:nb]
         self._zero_reference = np.zeros(len(groups))
-        # bells -> reported terms: pose, velocity, Σ end-effector, COM velocity, direction, torque
-        # and the task reward (the w4, w5 share of the normalized total)
-        t = 2 + n_ee
-        tm = np.zeros((len(w), len(REWARD_TERMS)))
+        # block bells -> reported terms: pose, velocity, Σ end-effector, (COM velocity,
+        # direction: set per step), torque, (task)
+        tm = np.zeros((nb, len(REWARD_TERMS)))
         tm[0, 0] = tm[1, 1] = 1.0
-        tm[2:t, 2] = 1.0
-        tm[t + 1, 3] = tm[t + 2, 4] = tm[t, 5] = 1.0
-        tm[t + 1 : t + 3, 6] = w[t + 1 : t + 3]
+        tm[2 : 2 + n_ee, 2] = 1.0
+        tm[2 + n_ee, 5] = 1.0
         self._term_matrix = tm
+        self._w_com, self._w_dir = float(w[nb]), float(w[nb + 1])
+        self._exp_com, self._exp_dir = float(exponent[nb]), float(exponent[nb + 1])
         # sensordata entries the observation reads: joints, end-effector x and z, up vector x, z
         ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, [0, 2]].ravel()
         self._obs_sensors = np.concatenate(
@@ -204,11 +205,11 @@ class ParamEnv(gym.Env):
         return table, np.diff(table, axis=0)
 
     def _reference_at(self, phase: float) -> np.ndarray:
-        """Linear interpolation in the tabulated reference: [pose, joint velocity, ee]."""
+        """Linear interpolation in the tabulated reference: [pose, joint velocity, ee, 0]."""
         x = (phase % 1.0) * REFERENCE_SAMPLES
         k = int(x)
-        table, slope = self._reference
-        return table[k] + (x - k) * slope[k]
+        rows, slopes = self._reference_rows
+        return rows[k] + (x - k) * slopes[k]
 
     # --- episode ------------------------------------------------------------------------------
 
@@ -290,15 +291,15 @@ class ParamEnv(gym.Env):
         self._com_vel = ((cx - ox) * inv, (cy - oy) * inv, (cz - oz) * inv)
         ring[self._steps % len(ring)] = com
 
-        reward, terms = self._reward(ref)
-        # A diverging simulation ends the episode, never the run: NaN or exploding joint
-        # velocities (their squared error in the reward), or MuJoCo's own reset of the state on
-        # a bad qpos, qvel or qacc.
+        # A diverging simulation ends the episode, never the run: NaN or exploding velocities,
+        # or MuJoCo's own reset of the state on a bad qpos, qvel or qacc.
+        qvel = d.qvel
         if (
-            not self._err[1] < self._max_velocity_err
+            not qvel @ qvel < self._max_qvel_sq
             or d.warning.number[INSTABILITY].sum() > self._unstable
         ):
             return self._diverged()
+        reward, terms = self._reward(ref)
         obs = self._observe()
         self._last_obs = obs
         qpos = d.qpos
@@ -336,20 +337,19 @@ class ParamEnv(gym.Env):
 
     def _reward(self, ref: np.ndarray | None) -> tuple[float, dict[str, float]]:
         """[WL19] Eq. 4-7: R = R_imit + R_task + R_reg, ‖x‖²_D = ‖x‖²/dim(x), each term a bell."""
-        d, err = self.data, self._err
-        if ref is None:
-            ref = self._zero_reference
-        diff = (d.sensordata[self._block] - ref) * self._block_scale
-        n = self._n_block_bells
-        err[:n] = (diff * diff) @ self._sum_matrix  # Eq. 5 pose, velocity, ee; Eq. 7 τ
+        d = self.data
+        sq = d.sensordata[self._block] - (self._zero_reference if ref is None else ref)
+        sq *= sq
+        bells = np.exp(sq @ self._block_exponent)  # Eq. 5 pose, velocity, each ee; Eq. 7 τ
+        terms = (bells @ self._term_matrix).tolist()
         vx, vy, _ = self._com_vel
         vx -= self._target_v
-        err[n] = vx * vx + vy * vy  # Eq. 6: average COM velocity vs target (horizontal)
+        terms[3] = math.exp((vx * vx + vy * vy) * self._exp_com)  # Eq. 6: COM velocity
         fx = d.xmat[self.character.root_body_id, 0]  # root forward axis (planar: x component)
-        err[n + 1] = 0.0 if fx * self._target_sign > 0 else 2.0  # Eq. 6: facing direction
-        bells = np.exp(err * self._neg_inv_sigma_dim)
-        reward = float(bells @ self._weights)
-        return reward, dict(zip(REWARD_TERMS, (bells @ self._term_matrix).tolist(), strict=True))
+        terms[4] = 1.0 if fx * self._target_sign > 0 else math.exp(2.0 * self._exp_dir)  # Eq. 6
+        terms[6] = self._w_com * terms[3] + self._w_dir * terms[4]  # task share of the reward
+        reward = float(bells @ self._w_block) + terms[6]
+        return reward, dict(zip(REWARD_TERMS, terms, strict=True))
 
     def _observe(self) -> np.ndarray:
         c, d = self.character, self.data
