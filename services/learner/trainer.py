@@ -1,6 +1,7 @@
 """The training loop: sample tasks, collect fragments, update PPO and V̄, refill S, checkpoint.
 
-[WL19] Alg. 1 with the rollouts behind a `RolloutBackend`: in-process workers for `--serial`.
+[WL19] Alg. 1 with the rollouts behind a `RolloutBackend`: `SerialBackend` (in-process, for
+`--serial`) or `services.learner.ray_backend.RayBackend` (Ray rollout actors).
 """
 
 from __future__ import annotations
