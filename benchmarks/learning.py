@@ -61,9 +61,7 @@ def _train_ours(
         from services.learner.ray_backend import RayBackend
 
         ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
-        backend = RayBackend(
-            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-        )
+        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     else:
         backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     t0 = time.perf_counter()

@@ -54,9 +54,7 @@ def actor_steps_per_s(cfg, trainer, n_actors: int, use_policy: bool, rounds: int
     """(b)-(d): fragments from n actors at once, after one warm-up fragment each."""
     cfg = cfg.model_copy(deep=True)
     cfg.actors.num_actors = n_actors
-    backend = RayBackend(
-        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     try:
         weights = [ray.put(trainer.learner.weights())]
 
@@ -89,9 +87,7 @@ def training_steps_per_s(cfg, mode: str, iterations: int) -> dict:
     cfg.actors.mode = mode
     with tempfile.TemporaryDirectory() as tmp:
         trainer = Trainer(cfg, Path(tmp))
-        backend = RayBackend(
-            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-        )
+        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
         actors = backend.num_actors
         try:
             trainer.iteration(backend)

@@ -95,9 +95,7 @@ def _train(cfg: ExperimentConfig, resume: bool, serial: bool, ray_address: str |
 
         fatal = (AllActorsLost,)
         started_ray = connect(ray_address)
-        backend = RayBackend(
-            cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-        )
+        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
         console.print(
             f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
             f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"

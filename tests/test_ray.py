@@ -39,9 +39,7 @@ def _cfg(**actors) -> ExperimentConfig:
 def test_two_actors_deliver_fragments_and_training_advances(local_ray, tmp_path):
     cfg = _cfg()
     trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(
-        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     try:
         assert backend.num_actors == 2 and backend.steps == 32  # 256 / (2 actors x 4 envs)
         frags = backend.collect(trainer.learner.weights(), trainer.learner.version)
@@ -63,9 +61,7 @@ def test_two_actors_deliver_fragments_and_training_advances(local_ray, tmp_path)
 def test_killed_actor_is_restarted_and_the_run_finishes(local_ray, tmp_path):
     cfg = _cfg(steps_per_fragment=150)  # fragments long enough to be killed in the middle
     trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(
-        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     victim = backend.pids()[0]
     first_done = threading.Event()
     metrics = []
@@ -113,9 +109,7 @@ def _pids_when_back(backend, timeout=120.0):
 def test_resume_restores_identical_state(local_ray, tmp_path):
     cfg = _cfg()
     first = Trainer(cfg, tmp_path)
-    backend = RayBackend(
-        cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks)
     try:
         first.train(backend, total_steps=2 * 256)
     finally:
@@ -140,7 +134,7 @@ def test_serial_and_ray_give_the_same_fragments(local_ray, tmp_path):
     b = Trainer(cfg, tmp_path / "ray")
     b.learner.policy.load_state_dict(a.learner.policy.state_dict())
     serial = SerialBackend(cfg, a.obs_dim, a.act_dim, a.sampler.next_tasks)
-    remote = RayBackend(cfg, b.obs_dim, b.act_dim, b.sampler.next_tasks, cfg.ppo.num_steps)
+    remote = RayBackend(cfg, b.obs_dim, b.act_dim, b.sampler.next_tasks)
     try:
         for _ in range(2):
             [fs] = serial.collect(a.learner.weights(), 0)
@@ -166,9 +160,7 @@ def test_serial_and_ray_give_the_same_fragments(local_ray, tmp_path):
 def test_pipelined_mode_samples_during_the_update(local_ray, tmp_path):
     cfg = _cfg(mode="pipelined")
     trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(
-        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     metrics = []
     try:
         trainer.train(backend, total_steps=4 * 256, on_metrics=metrics.append)
@@ -189,9 +181,7 @@ def test_all_actors_gone_raises_after_the_timeout(local_ray, tmp_path):
 
     cfg = _cfg(lost_timeout=2.0)
     trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(
-        cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks, cfg.ppo.num_steps
-    )
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
     for actor in backend.actors:
         ray.kill(actor, no_restart=True)
     try:

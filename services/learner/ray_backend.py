@@ -49,14 +49,13 @@ class RayBackend:
         obs_dim: int,
         act_dim: int,
         next_tasks: Callable[[int], np.ndarray],
-        num_steps: int,
     ) -> None:
         self.cfg = cfg
         self.mode = cfg.actors.mode
         self.next_tasks = next_tasks
         n = resolve_num_actors(cfg.actors.num_actors)
         m = cfg.actors.num_envs
-        self.steps = cfg.actors.steps_per_fragment or max(1, -(-num_steps // (n * m)))
+        self.steps = cfg.actors.steps_per_fragment or max(1, -(-cfg.ppo.num_steps // (n * m)))
         self.n_tasks = tasks_per_fragment(m, self.steps)
         config = cfg.model_dump(mode="json")
         self.actors = [
