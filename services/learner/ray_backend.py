@@ -98,7 +98,11 @@ class RayBackend:
                     f"no rollout actor delivered a fragment for "
                     f"{self.cfg.actors.lost_timeout:.0f} s"
                 )
-            ready, _ = ray.wait(list(self.pending), num_returns=1, timeout=1.0)
+            # One fragment per actor and iteration: an answered actor's next fragment (pipelined,
+            # or a re-request after a failure) waits for the next iteration, unless nothing
+            # arrived at all.
+            waiting = [r for r, i in self.pending.items() if i not in answered]
+            ready, _ = ray.wait(waiting or list(self.pending), num_returns=1, timeout=1.0)
             if not ready:
                 continue
             ref = ready[0]
