@@ -113,8 +113,6 @@ class ParamEnv(gym.Env):
         self._fall_height = self.config.fall_height_ratio * c.hip_height
         self._max_qvel_sq = c.model.nv * MAX_SPEED**2
         self._reference = self._tabulate_reference() if self.motion is not None else None
-        if self._reference is not None:  # rows as a list: indexing it is cheaper per step
-            self._reference_rows = (list(self._reference[0]), list(self._reference[1]))
 
     def _layout(self) -> None:
         """Index and weight arrays of the reward and observation; the same for every shape."""
@@ -177,11 +175,11 @@ class ParamEnv(gym.Env):
             [np.arange(2 * nj), ee, [c.up_sensor.start, c.up_sensor.start + 2]]
         )
 
-    def _tabulate_reference(self) -> tuple[np.ndarray, np.ndarray]:
+    def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
 
-        Rows k = 0..K sample φ = k/K; returns (table [K+1, P], row differences [K, P]) so that
-        a lookup is one multiply-add.
+        Rows k = 0..K sample φ = k/K; returns (rows [K+1] of [P], row differences [K] of [P]) as
+        lists, so that a lookup is one multiply-add (indexing a list is cheaper per step).
         """
         c, d, m = self.character, self.data, self.model
         rows = []
@@ -202,13 +200,13 @@ class ParamEnv(gym.Env):
                 )
             )
         table = np.array(rows)
-        return table, np.diff(table, axis=0)
+        return list(table), list(np.diff(table, axis=0))
 
     def _reference_at(self, phase: float) -> np.ndarray:
         """Linear interpolation in the tabulated reference: [pose, joint velocity, ee, 0]."""
         x = (phase % 1.0) * REFERENCE_SAMPLES
         k = int(x)
-        rows, slopes = self._reference_rows
+        rows, slopes = self._reference
         return rows[k] + (x - k) * slopes[k]
 
     # --- episode ------------------------------------------------------------------------------

@@ -108,9 +108,7 @@ class RolloutWorker:
         self._episode_counter = 0
         self._seed = seed
         self._obs: np.ndarray | None = None
-        self._task_rows: list[np.ndarray] = []
         self._ep: list[dict] = []
-        self.diverged_episodes = 0
 
     def set_weights(self, weights: dict[str, torch.Tensor], version: int) -> None:
         if version != self.policy_version:
@@ -136,7 +134,7 @@ class RolloutWorker:
 
     def _reset_all(self) -> None:
         m = len(self.envs)
-        self._ep = [{}] * m
+        self._ep = [{} for _ in range(m)]
         tasks = self._tasks(m)
         seeds = self.rng.integers(0, 2**31 - 1, size=m)
         self._obs = np.stack(
@@ -197,7 +195,6 @@ class RolloutWorker:
                 if te or tr:
                     if tr:
                         final_obs.append((t, i, results[i][0]))
-                    self.diverged_episodes += int(info["diverged"])
                     episodes.append(
                         EpisodeSummary(
                             ep["id"],
