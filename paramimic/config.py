@@ -185,6 +185,10 @@ class ExperimentConfig(Section):
             raise ValueError("ppo.minibatch_size must not exceed ppo.num_steps")
         return self
 
+    def display_dims(self) -> tuple[str, ...]:
+        """Up to two task dimensions for grids: `curriculum.display_dims`, else the first free."""
+        return self.grid_dims() or tuple(n for n, (lo, hi) in self.task.items() if hi > lo)[:2]
+
     def grid_dims(self) -> tuple[str, str] | None:
         """The two task dimensions shown in grids and heatmaps."""
         if self.curriculum.display_dims is not None:

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import json
-import signal
 from pathlib import Path
 from typing import Annotated
 
 import typer
-import yaml
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from paramimic.config import ConfigError, ExperimentConfig, load_config
 
@@ -31,11 +28,30 @@ def _fail(message: str) -> None:
 def train(
     config: Annotated[Path, typer.Argument(help="experiment YAML, e.g. configs/walker_legs.yaml")],
     serial: Annotated[
-        bool, typer.Option("--serial", help="run everything in this process, without Ray")
+        bool,
+        typer.Option("--serial", help="run everything in this process, without Ray/Redis/API"),
     ] = False,
     ray_address: Annotated[
         str | None,
         typer.Option(help="join this Ray cluster (default: $RAY_ADDRESS, else start a local one)"),
+    ] = None,
+    redis_url: Annotated[
+        str | None,
+        typer.Option(
+            envvar="REDIS_URL",
+            help="use this Redis (redis://[:password@]host:port/db); default: start an "
+            "embedded one with its data in the run directory",
+        ),
+    ] = None,
+    api: Annotated[bool, typer.Option("--api/--no-api", help="serve the progress API")] = True,
+    api_host: Annotated[str, typer.Option(help="API address")] = "127.0.0.1",
+    api_port: Annotated[int, typer.Option(help="API port (0: any free port)")] = 8000,
+    api_token: Annotated[
+        str | None,
+        typer.Option(
+            envvar="PARAMIMIC_API_TOKEN",
+            help="bearer token for pause/resume/k over the API (none: those are disabled)",
+        ),
     ] = None,
     total_steps: Annotated[int | None, typer.Option(help="override train.total_steps")] = None,
     run_dir: Annotated[Path | None, typer.Option(help="override train.run_dir")] = None,
@@ -44,7 +60,9 @@ def train(
     ] = False,
     seed: Annotated[int | None, typer.Option(help="override train.seed")] = None,
 ) -> None:
-    """Train a controller for CONFIG: rollouts on Ray actors, or in-process with --serial."""
+    """Train a controller for CONFIG: Redis, Ray actors, the sampler and the API, or --serial."""
+    from services.launch.training import LaunchError, LaunchOptions, run_training
+
     overrides = {
         k: v
         for k, v in {
@@ -58,93 +76,76 @@ def train(
         cfg = load_config(config, overrides)
     except ConfigError as e:
         _fail(str(e))
-    _train(cfg, resume, serial, ray_address)
-
-
-def _train(cfg: ExperimentConfig, resume: bool, serial: bool, ray_address: str | None) -> None:
-    from services.learner import checkpoint
-    from services.learner.trainer import SerialBackend, Trainer
-
-    run_dir = cfg.resolved_run_dir()
-    if not resume and (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
-        _fail(f"{run_dir} already holds a run; pass --resume or another --run-dir")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    trainer = Trainer(cfg, run_dir)
-    if resume:
-        try:
-            state = checkpoint.load(run_dir)
-        except FileNotFoundError as e:
-            _fail(str(e))
-        trainer.load_state_dict(state)
-        console.print(
-            f"resumed at iteration {trainer.progress.iteration}, "
-            f"{trainer.progress.env_steps} env steps"
-        )
-    (run_dir / "config.yaml").write_text(
-        yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
+    if not 0 <= api_port < 65536:
+        _fail(f"--api-port must be in 0..65535, got {api_port}")
+    options = LaunchOptions(
+        resume, serial, ray_address, redis_url, api, api_host, api_port, api_token or None
     )
-    started_ray = False
-    fatal: tuple[type[Exception], ...] = ()  # errors that end the run with a message
-    if serial:
-        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-    else:
-        import ray
-
-        from services.learner.cluster import connect
-        from services.learner.ray_backend import AllActorsLost, RayBackend
-
-        fatal = (AllActorsLost,)
-        started_ray = connect(ray_address)
-        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-        console.print(
-            f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
-            f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"
-        )
-    stop = {"flag": False}
-
-    def on_sigint(signum, frame):  # first Ctrl-C: finish the iteration, checkpoint, exit
-        stop["flag"] = True
-        console.print("[yellow]stopping after this iteration...[/]")
-
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    total = cfg.train.total_steps
-    console.print(f"run directory: {run_dir}")
-    code = 0
     try:
-        with Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
-            TextColumn("{task.fields[info]}"),
-            TimeElapsedColumn(),
-            console=console,
-        ) as bar:
-            task = bar.add_task(
-                "training", total=total, completed=trainer.progress.env_steps, info=""
-            )
-
-            def show(m: dict) -> None:
-                info = (
-                    f"it {m['iteration']}  {m['steps_per_second']:,.0f} steps/s  "
-                    f"return {m.get('mean_return', float('nan')):.2f}  "
-                    f"fall {m.get('fall_percent', float('nan')):.0f}%"
-                )
-                if m.get("actor_restarts"):
-                    info += f"  restarts {m['actor_restarts']}"
-                bar.update(task, completed=m["env_steps"], info=info)
-
-            trainer.train(backend, total, on_metrics=show, should_stop=lambda: stop["flag"])
-    except fatal as e:  # the checkpoint was written by Trainer.train on the way out
-        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
-        code = 3
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        backend.close()
-        if started_ray:
-            ray.shutdown()
-    console.print(f"checkpoint: {run_dir / 'checkpoints' / 'latest.pt'}")
+        code = run_training(cfg, options, console)
+    except LaunchError as e:
+        _fail(str(e))
     if code:
         raise typer.Exit(code=code)
+
+
+@app.command("api")
+def api_cmd(
+    redis_url: Annotated[
+        str, typer.Option(envvar="REDIS_URL", help="the Redis that holds the runs")
+    ] = "redis://127.0.0.1:6379/0",
+    host: Annotated[str, typer.Option()] = "127.0.0.1",
+    port: Annotated[int, typer.Option()] = 8000,
+) -> None:
+    """Serve the progress API alone (token for the mutating endpoints: $PARAMIMIC_API_TOKEN)."""
+    from services.api.app import serve
+    from services.api.settings import Settings
+
+    serve(Settings(redis_url=redis_url), host, port)
+
+
+@app.command()
+def status(
+    api: Annotated[str, typer.Option(help="the API's URL")] = "http://127.0.0.1:8000",
+    run: Annotated[str | None, typer.Option(help="run id (default: the newest run)")] = None,
+) -> None:
+    """Print a run's progress and curriculum state, read from the API."""
+    import httpx
+    from rich.table import Table
+
+    try:
+        with httpx.Client(base_url=api, timeout=10.0) as client:
+            if run is None:
+                runs = client.get("/runs").raise_for_status().json()
+                if not runs:
+                    _fail(f"no runs at {api}")
+                run = runs[0]["run_id"]
+            progress = client.get(f"/runs/{run}/progress")
+            if progress.status_code == 404:
+                _fail(progress.json()["detail"])
+            progress = progress.raise_for_status().json()
+            cur = client.get(f"/runs/{run}/curriculum")
+            curriculum = cur.json() if cur.status_code == 200 else None
+    except httpx.HTTPError as e:
+        _fail(f"cannot reach the API at {api}: {e}")
+    table = Table(title=f"run {run}", show_header=False)
+    for key in ("status", "iteration", "env_steps", "total_steps", "episodes",
+                "steps_per_second", "mean_return", "fall_percent"):  # fmt: skip
+        table.add_row(key, _fmt(progress.get(key)))
+    if curriculum:
+        for key in ("mode", "k", "mu", "refills", "buffer_adaptive", "buffer_size",
+                    "episodes", "tasks_served", "phase", "explored_ratio", "paused"):  # fmt: skip
+            table.add_row(f"curriculum.{key}", _fmt(curriculum.get(key)))
+        table.add_row("curriculum.buffer_mean", _fmt(curriculum["buffer_mean"]))
+    console.print(table)
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:,.4g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {x:.3g}" for k, x in v.items())
+    return "-" if v is None else str(v)
 
 
 @app.command("eval")

@@ -126,8 +126,8 @@ class NumpyPolicy:
         state = {k: v.detach().numpy().astype(np.float32) for k, v in policy.state_dict().items()}
         self.obs_mean, self.obs_std = state["obs_mean"], state["obs_std"]
         self.obs_clip = np.float32(policy.obs_clip)
-        self.pi = _layers(policy.pi)
-        self.v = _layers(policy.v)
+        self.pi = numpy_layers(policy.pi)
+        self.v = numpy_layers(policy.v)
         self.log_std = state["log_std"]
         self.std = np.exp(self.log_std)
         self.act_dim = policy.act_dim
@@ -140,8 +140,8 @@ class NumpyPolicy:
     def act(self, obs: np.ndarray, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Actions, log-probs and values for a batch; `noise=None` acts deterministically."""
         x = self._normalize(obs)
-        mean = _forward(self.pi, x)
-        value = _forward(self.v, x)[:, 0]
+        mean = numpy_forward(self.pi, x)
+        value = numpy_forward(self.v, x)[:, 0]
         if noise is None:
             return mean, np.full(len(x), self._logp_const, np.float32), value
         noise = noise.astype(np.float32)
@@ -150,10 +150,11 @@ class NumpyPolicy:
         return actions, logp.astype(np.float32), value
 
     def value(self, obs: np.ndarray) -> np.ndarray:
-        return _forward(self.v, self._normalize(obs))[:, 0]
+        return numpy_forward(self.v, self._normalize(obs))[:, 0]
 
 
-def _layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
+def numpy_layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The (W [in, out], b [out]) pairs of an mlp() as numpy arrays."""
     return [
         (m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
         for m in seq
@@ -161,7 +162,8 @@ def _layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
     ]
 
 
-def _forward(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
+def numpy_forward(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
+    """mlp() forward in numpy: x [n, in] -> [n, out]."""
     last = len(layers) - 1
     for i, (w, b) in enumerate(layers):
         x = x @ w + b

@@ -96,6 +96,7 @@ class RolloutWorker:
         seed: int,
         worker_id: int = 0,
         task_source: TaskSource | None = None,
+        id_prefix: str = "",
     ) -> None:
         self.envs = [make_env() for _ in range(num_envs)]
         self.policy = ActorCritic(obs_dim, act_dim, hidden, init_log_std=0.0)
@@ -104,6 +105,7 @@ class RolloutWorker:
         self.policy_version = -1
         self.rng = np.random.default_rng(seed)
         self.worker_id = worker_id
+        self.id_prefix = id_prefix
         self.task_source = task_source
         self._episode_counter = 0
         self._seed = seed
@@ -123,7 +125,7 @@ class RolloutWorker:
         env = self.envs[i]
         obs, info = env.reset(seed=seed, options=None if task is None else {"task": task})
         self._ep[i] = {
-            "id": f"w{self.worker_id}-s{self._seed}-e{self._episode_counter}",
+            "id": f"{self.id_prefix}w{self.worker_id}-s{self._seed}-e{self._episode_counter}",
             "task": info["task"],
             "ret": 0.0,
             "len": 0,

@@ -1,8 +1,10 @@
 """The rollout actor: a Ray shell around paramimic.rl.rollout.RolloutWorker.
 
-It fetches the policy weights from the object store only when their version changes, runs one
-fragment with the library's stepping loop, and returns it. A diverging simulation ends its
-episode inside the env; nothing here can kill the actor but the process dying.
+It fetches the policy weights from the object store only when their version changes, asks the
+sampler for the tasks of the episodes that will start in the fragment, runs the fragment with the
+library's stepping loop, reports the finished episodes to the sampler and returns the fragment.
+A diverging simulation ends its episode inside the env; nothing here can kill the actor but the
+process dying.
 """
 
 from __future__ import annotations
@@ -17,13 +19,26 @@ import torch
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.rl.rollout import Fragment, RolloutWorker
+from services.keys import RAY_NAMESPACE
 
 
 @ray.remote(num_cpus=1, max_restarts=-1)
 class RolloutActor:
-    def __init__(self, config: dict, obs_dim: int, act_dim: int, seed: int, worker_id: int) -> None:
+    def __init__(
+        self,
+        config: dict,
+        obs_dim: int,
+        act_dim: int,
+        seed: int,
+        worker_id: int,
+        sampler: str | None = None,
+    ) -> None:
         torch.set_num_threads(1)
         cfg = ExperimentConfig.model_validate(config)
+        # the named sampler actor (looked up by name: a handle argument would live in the object
+        # store, which a restarted actor cannot rely on)
+        self.sampler = None if sampler is None else ray.get_actor(sampler, namespace=RAY_NAMESPACE)
+        self.source = f"actor{worker_id}"
         self.restarted = ray.get_runtime_context().was_current_actor_reconstructed
         if self.restarted:  # a restarted actor must not replay the episodes it already ran
             seed = int(np.random.SeedSequence([seed, os.getpid()]).generate_state(1)[0])
@@ -35,8 +50,9 @@ class RolloutActor:
             cfg.ppo.hidden_sizes,
             seed=seed,
             worker_id=worker_id,
+            # episode ids stay unique across restarts and resumed runs (the sampler dedupes by id)
+            id_prefix=os.urandom(4).hex() + "-",
         )
-        self.restarted = ray.get_runtime_context().was_current_actor_reconstructed
 
     def pid(self) -> int:
         return os.getpid()
@@ -49,11 +65,17 @@ class RolloutActor:
         weights: list[ray.ObjectRef],
         version: int,
         num_steps: int,
-        tasks: np.ndarray,
+        tasks: int | np.ndarray,
         use_policy: bool = True,
     ) -> Fragment:
-        """One fragment. `weights` is a one-element list so that Ray does not fetch the
-        (unchanged) weights on every call: they are read only when `version` is new."""
+        """One fragment whose episodes take `tasks` (an array) or that many tasks from the
+        sampler. `weights` is a one-element list so that Ray does not fetch the (unchanged)
+        weights on every call: they are read only when `version` is new."""
         if version != self.worker.policy_version:
             self.worker.set_weights(ray.get(weights[0]), version)
-        return self.worker.collect(num_steps, tasks, use_policy)
+        if isinstance(tasks, int):
+            tasks = ray.get(self.sampler.next_tasks.remote(tasks, self.source))
+        fragment = self.worker.collect(num_steps, tasks, use_policy)
+        if self.sampler is not None:  # acknowledged before the learner sees the fragment
+            ray.get(self.sampler.ingest.remote([e.to_dict() for e in fragment.episodes]))
+        return fragment

@@ -1,1 +1,1 @@
-"""The progress API (Part 3): FastAPI over Redis."""
+"""The progress API (FastAPI): reads Redis only; never imports torch, mujoco or ray."""

@@ -16,7 +16,6 @@ raised so that the learner can checkpoint and exit.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import numpy as np
 import ray
@@ -24,6 +23,7 @@ import torch
 from ray.exceptions import RayActorError
 
 from paramimic.config import ExperimentConfig
+from paramimic.curriculum.marginal_value import Layers
 from paramimic.rl.rollout import Fragment, tasks_per_fragment
 from services.actors.rollout_actor import RolloutActor
 
@@ -42,24 +42,54 @@ def resolve_num_actors(setting: int | str) -> int:
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
 
 
+class SamplerClient:
+    """The learner's view of the sampler actor: the calls of a local AdaptiveCurriculum."""
+
+    def __init__(self, handle: ray.actor.ActorHandle) -> None:
+        self.handle = handle
+
+    def next_tasks(self, n: int) -> np.ndarray:
+        return ray.get(self.handle.next_tasks.remote(n, "learner"))
+
+    def ingest(self, episodes: list[dict]) -> int:
+        return ray.get(self.handle.ingest.remote(episodes))
+
+    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
+        ray.get(self.handle.update_marginal.remote(layers, mu, iteration, refill))
+
+    def set_k(self, k: float) -> None:
+        ray.get(self.handle.set_k.remote(k))
+
+    def summary(self) -> dict:
+        return ray.get(self.handle.summary.remote())
+
+    def to_state(self) -> dict:
+        return ray.get(self.handle.to_state.remote())
+
+    def from_state(self, state: dict) -> None:
+        ray.get(self.handle.from_state.remote(state))
+
+
 class RayBackend:
+    """N rollout actors that take their tasks from, and report their episodes to, the named
+    sampler actor `sampler`."""
+
     def __init__(
         self,
         cfg: ExperimentConfig,
         obs_dim: int,
         act_dim: int,
-        next_tasks: Callable[[int], np.ndarray],
+        sampler: str,
     ) -> None:
         self.cfg = cfg
         self.mode = cfg.actors.mode
-        self.next_tasks = next_tasks
         n = resolve_num_actors(cfg.actors.num_actors)
         m = cfg.actors.num_envs
         self.steps = cfg.actors.steps_per_fragment or max(1, -(-cfg.ppo.num_steps // (n * m)))
         self.n_tasks = tasks_per_fragment(m, self.steps)
         config = cfg.model_dump(mode="json")
         self.actors = [
-            RolloutActor.remote(config, obs_dim, act_dim, cfg.train.seed + 1 + i, i)
+            RolloutActor.remote(config, obs_dim, act_dim, cfg.train.seed + 1 + i, i, sampler)
             for i in range(n)
         ]
         self.pending: dict[ray.ObjectRef, int] = {}  # in-flight fragment -> actor index
@@ -74,9 +104,7 @@ class RayBackend:
         return len(self.actors)
 
     def _request(self, i: int) -> None:
-        ref = self.actors[i].sample.remote(
-            self.weights_ref, self.version, self.steps, self.next_tasks(self.n_tasks)
-        )
+        ref = self.actors[i].sample.remote(self.weights_ref, self.version, self.steps, self.n_tasks)
         self.pending[ref] = i
 
     def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:

@@ -1,7 +1,8 @@
-"""The training loop: sample tasks, collect fragments, update PPO and V̄, refill S, checkpoint.
+"""The training loop: collect fragments, update PPO and V̄, send V̄ to the curriculum, checkpoint.
 
-[WL19] Alg. 1 with the rollouts behind a `RolloutBackend`: `SerialBackend` (in-process, for
-`--serial`) or `services.learner.ray_backend.RayBackend` (Ray rollout actors).
+[WL19] Alg. 1 with the rollouts behind a `RolloutBackend` and the task sampling behind a
+`Curriculum`: in-process (`SerialBackend` and `AdaptiveCurriculum`, for `--serial`) or on Ray
+(`services.learner.ray_backend.RayBackend` and the sampler actor through `SamplerClient`).
 """
 
 from __future__ import annotations
@@ -18,11 +19,31 @@ import numpy as np
 import torch
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum import AdaptiveSampler, MarginalValue, TaskSpace
+from paramimic.curriculum import MarginalValue, TaskSpace
+from paramimic.curriculum.adaptive import AdaptiveCurriculum
+from paramimic.curriculum.marginal_value import Layers
 from paramimic.envs import make_env
 from paramimic.rl.ppo import PPOLearner
 from paramimic.rl.rollout import EpisodeSummary, Fragment, RolloutWorker, tasks_per_fragment
 from services.learner import checkpoint
+
+
+class Curriculum(Protocol):
+    """What the learner and the rollouts ask of the curriculum (local or the sampler actor)."""
+
+    def next_tasks(self, n: int) -> np.ndarray: ...
+
+    def ingest(self, episodes: list[dict]) -> int: ...
+
+    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None: ...
+
+    def set_k(self, k: float) -> None: ...
+
+    def summary(self) -> dict: ...
+
+    def to_state(self) -> dict: ...
+
+    def from_state(self, state: dict) -> None: ...
 
 
 class RolloutBackend(Protocol):
@@ -42,12 +63,12 @@ class SerialBackend:
         cfg: ExperimentConfig,
         obs_dim: int,
         act_dim: int,
-        next_tasks: Callable[[int], np.ndarray],
+        curriculum: Curriculum,
     ) -> None:
         m = cfg.actors.num_envs
         self.steps = cfg.actors.steps_per_fragment or math.ceil(cfg.ppo.num_steps / m)
         self.n_tasks = tasks_per_fragment(m, self.steps)
-        self.next_tasks = next_tasks
+        self.curriculum = curriculum
         self.worker = RolloutWorker(
             lambda: make_env(cfg.character, cfg.task, cfg.env),
             m,
@@ -60,7 +81,9 @@ class SerialBackend:
 
     def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:
         self.worker.set_weights(weights, version)
-        return [self.worker.collect(self.steps, self.next_tasks(self.n_tasks))]
+        fragment = self.worker.collect(self.steps, self.curriculum.next_tasks(self.n_tasks))
+        self.curriculum.ingest([e.to_dict() for e in fragment.episodes])
+        return [fragment]
 
     def stats(self) -> dict:
         return {"actors": 0}
@@ -77,7 +100,9 @@ class Progress:
 
 
 class Trainer:
-    def __init__(self, cfg: ExperimentConfig, run_dir: Path) -> None:
+    def __init__(
+        self, cfg: ExperimentConfig, run_dir: Path, curriculum: Curriculum | None = None
+    ) -> None:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         probe = make_env(cfg.character, cfg.task, cfg.env)
@@ -96,9 +121,7 @@ class Trainer:
             cc.marginal_batch,
             seed=seed + 2,
         )
-        self.sampler = AdaptiveSampler(
-            self.space, cc.k, cc.n_mcmc, cc.chains, cc.burn_in, seed=seed + 3
-        )
+        self.curriculum = curriculum or AdaptiveCurriculum.from_config(cfg)
         self.progress = Progress()
 
     # --- state --------------------------------------------------------------------------------
@@ -108,7 +131,7 @@ class Trainer:
             "config": self.cfg.model_dump(mode="json"),
             "learner": self.learner.state_dict(),
             "marginal": self.marginal.to_state(),
-            "sampler": self.sampler.to_state(),
+            "curriculum": self.curriculum.to_state(),
             "progress": vars(self.progress).copy(),
             "obs_dim": self.obs_dim,
             "act_dim": self.act_dim,
@@ -117,7 +140,7 @@ class Trainer:
     def load_state_dict(self, state: dict) -> None:
         self.learner.load_state_dict(state["learner"])
         self.marginal.from_state(state["marginal"])
-        self.sampler.from_state(state["sampler"])
+        self.curriculum.from_state(state["curriculum"])
         self.progress = Progress(**state["progress"])
 
     def save_checkpoint(self) -> Path:
@@ -129,8 +152,9 @@ class Trainer:
         """One iteration of Alg. 1; returns its metrics."""
         cfg, it = self.cfg, self.progress.iteration
         t0 = time.perf_counter()
-        if it % cfg.curriculum.p_mcmc == 0 and self.marginal.fitted:
-            self.sampler.refill(self.marginal.predict, self.marginal.mu)  # l.3
+        if self.marginal.fitted:  # l.3: S is refilled every P_MCMC iterations
+            refill = it % cfg.curriculum.p_mcmc == 0
+            self.curriculum.update_marginal(self.marginal.layers(), self.marginal.mu, it, refill)
         fragments = backend.collect(self.learner.weights(), self.learner.version)
         t_collect = time.perf_counter() - t0
         batch = self.learner.build_batch(fragments)
@@ -170,21 +194,36 @@ class Trainer:
         total_steps: int,
         on_metrics: Callable[[dict], None] | None = None,
         should_stop: Callable[[], bool] = lambda: False,
+        before_iteration: Callable[[], None] | None = None,
+        on_checkpoint: Callable[[Path, int], None] | None = None,
     ) -> None:
-        """Iterate until `total_steps` env steps; checkpoint every K iterations and at the end."""
+        """Iterate until `total_steps` env steps; checkpoint every K iterations and at the end.
+
+        `before_iteration` may block (a paused run); `should_stop` is asked before and after it.
+        """
+
+        def checkpoint_now() -> None:
+            path = self.save_checkpoint()
+            if on_checkpoint:
+                on_checkpoint(path, self.progress.iteration)
+
         log = (self.run_dir / "metrics.jsonl").open("a")
         try:
             while self.progress.env_steps < total_steps and not should_stop():
+                if before_iteration:
+                    before_iteration()
+                    if should_stop():
+                        break
                 m = self.iteration(backend)
                 log.write(json.dumps(m) + "\n")
                 log.flush()
                 if on_metrics:
                     on_metrics(m)
                 if self.progress.iteration % self.cfg.train.checkpoint_every == 0:
-                    self.save_checkpoint()
+                    checkpoint_now()
         finally:
             log.close()
-            self.save_checkpoint()
+            checkpoint_now()
 
 
 def episode_metrics(episodes: list[EpisodeSummary]) -> dict:

@@ -1,1 +1,1 @@
-"""The sampler service (Part 3): paramimic.curriculum behind a named Ray actor, state in Redis."""
+"""The sampler service: the curriculum ([WL19] adaptive sampling) as a Ray actor, state in Redis."""

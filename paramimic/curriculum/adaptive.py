@@ -1,0 +1,170 @@
+"""The [WL19] curriculum as the sampler owns it: the buffer S, the latest V̄ and μ, k, and what
+finished episodes report. Pure and serialisable (`to_state` / `from_state`); the sampler service
+adds Ray and Redis around it, the serial trainer uses it in-process.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from paramimic.config import CurriculumConfig, ExperimentConfig
+from paramimic.curriculum.marginal_value import Layers, marginal_function
+from paramimic.curriculum.mcmc import AdaptiveSampler
+from paramimic.curriculum.task_space import TaskSpace
+
+STATE_PARTS = ("core", "buffer", "marginal")
+STAT_FIELDS = ("episodes", "steps", "falls", "diverged", "return_sum", "tasks_served", "batches")
+
+
+class AdaptiveCurriculum:
+    """Alg. 1 l.3 and l.7 of [WL19] (S refilled by MCMC on exp(-k(V̄-μ)/μ); tasks drawn from S)."""
+
+    def __init__(
+        self,
+        space: TaskSpace,
+        config: CurriculumConfig,
+        seed: int,
+        display_dims: Sequence[str] = (),
+    ) -> None:
+        self.space = space
+        self.sampler = AdaptiveSampler(
+            space, config.k, config.n_mcmc, config.chains, config.burn_in, seed=seed
+        )
+        self.display_dims = tuple(display_dims)[:2]
+        self.layers: Layers | None = None  # the latest V̄ from the learner
+        self.mu: float | None = None
+        self.marginal_iteration = -1
+        self.stats: dict[str, float] = dict.fromkeys(STAT_FIELDS, 0)
+
+    @classmethod
+    def from_config(cls, cfg: ExperimentConfig) -> AdaptiveCurriculum:
+        space = TaskSpace.from_ranges(cfg.task)
+        return cls(space, cfg.curriculum, seed=cfg.train.seed + 3, display_dims=cfg.display_dims())
+
+    @property
+    def mode(self) -> str:
+        return "uniform" if self.sampler.k == 0 else "adaptive"
+
+    # --- the four things that change the state -----------------------------------------------
+
+    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
+        """Take the learner's V̄ and μ; refill S by MCMC if `refill` (every P_MCMC iterations)."""
+        self.layers = [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in layers]
+        self.mu = float(mu)
+        self.marginal_iteration = int(iteration)
+        if refill:
+            self.sampler.refill(marginal_function(self.layers, self.space), self.mu)
+
+    def next_tasks(self, n: int) -> np.ndarray:
+        """n task parameters drawn from S: [n, d]."""
+        tasks = self.sampler.next_tasks(n)
+        self.stats["tasks_served"] += n
+        self.stats["batches"] += 1
+        return tasks
+
+    def ingest(self, episodes: Iterable[dict]) -> int:
+        """Count finished episodes (EpisodeSummary.to_dict()); the caller removes duplicates."""
+        n = 0
+        for e in episodes:
+            n += 1
+            self.stats["episodes"] += 1
+            self.stats["steps"] += int(e["length"])
+            self.stats["falls"] += int(bool(e["fell"]))
+            self.stats["diverged"] += int(bool(e["diverged"]))
+            self.stats["return_sum"] += float(e["return"])
+        return n
+
+    def set_k(self, k: float) -> None:
+        if not k >= 0:
+            raise ValueError(f"k must be >= 0, got {k}")
+        self.sampler.k = float(k)
+
+    # --- views ----------------------------------------------------------------------------------
+
+    def marginal_grid(self, n: int = 21) -> dict | None:
+        """V̄ over the display dims (others at the box centre): values [len(ys)][len(xs)]."""
+        if self.layers is None:
+            return None
+        space, dims = self.space, self.display_dims
+        if len(dims) == 2:
+            xs, ys, pts = space.grid(dims, n)  # type: ignore[arg-type]
+        else:  # one free dimension (a line) or none (the centre)
+            ys = np.zeros(0)
+            pts = np.tile(space.center, (n if dims else 1, 1))
+            xs = np.zeros(0)
+            if dims:
+                i = space.names.index(dims[0])
+                xs = pts[:, i] = np.linspace(space.low[i], space.high[i], n)
+        v = marginal_function(self.layers, space)(pts).reshape(max(len(ys), 1), -1)
+        return {
+            "dims": list(dims),
+            "xs": xs.tolist(),
+            "ys": ys.tolist(),
+            "values": v.tolist(),
+            "mu": self.mu,
+            "iteration": self.marginal_iteration,
+        }
+
+    def summary(self) -> dict:
+        """The public state: what the API shows under /curriculum."""
+        s, buf = self.stats, self.sampler.buffer
+        episodes = max(s["episodes"], 1)
+        return {
+            "mode": self.mode,
+            "k": self.sampler.k,
+            "mu": self.mu,
+            "marginal_iteration": self.marginal_iteration,
+            "refills": self.sampler.refills,
+            "buffer_adaptive": self.sampler.adaptive,
+            "buffer_size": len(buf),
+            "buffer_mean": self.space.to_dict(buf.mean(axis=0)),
+            "buffer_std": self.space.to_dict(buf.std(axis=0)),
+            "task_names": list(self.space.names),
+            "episodes": int(s["episodes"]),
+            "mean_return": s["return_sum"] / episodes if s["episodes"] else None,
+            "fall_percent": 100.0 * s["falls"] / episodes if s["episodes"] else None,
+            "tasks_served": int(s["tasks_served"]),
+            # [L21] §6 fields, filled by the exploration/refinement curriculum (Part 4)
+            "phase": None,
+            "explored_ratio": None,
+            "exploration_rate_surrounding": None,
+            "exploration_rate_visited": None,
+        }
+
+    # --- state ----------------------------------------------------------------------------------
+
+    def to_state(self, parts: Iterable[str] = STATE_PARTS) -> dict:
+        """JSON-able state in three parts: `core` changes on every call, `buffer` on refills,
+        `marginal` when the learner sends V̄; `parts` picks some of them."""
+        state: dict = {}
+        if "core" in parts or "buffer" in parts:
+            core = self.sampler.to_state()
+            buffer = core.pop("buffer")
+            if "buffer" in parts:
+                state["buffer"] = buffer
+            if "core" in parts:
+                state["core"] = core | {
+                    "mu": self.mu,
+                    "marginal_iteration": self.marginal_iteration,
+                    "stats": dict(self.stats),
+                }
+        if "marginal" in parts:
+            state["marginal"] = (
+                None if self.layers is None else [[w.tolist(), b.tolist()] for w, b in self.layers]
+            )
+        return state
+
+    def from_state(self, state: dict) -> None:
+        core = dict(state["core"])
+        self.mu = core.pop("mu")
+        self.marginal_iteration = int(core.pop("marginal_iteration"))
+        self.stats = dict.fromkeys(STAT_FIELDS, 0) | core.pop("stats")
+        self.sampler.from_state(core | {"buffer": state["buffer"]})
+        marginal = state["marginal"]
+        self.layers = (
+            None
+            if marginal is None
+            else [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in marginal]
+        )

@@ -1,0 +1,246 @@
+"""The endpoints. They read Redis (and, for pause/resume/k with a bearer token, write the run's
+control hash that the learner polls); nothing here imports torch, mujoco or ray."""
+
+from __future__ import annotations
+
+import json
+import secrets
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from redis.asyncio import Redis
+
+from services.api.models import (
+    Accepted,
+    Curriculum,
+    Event,
+    Health,
+    HistoryPage,
+    MarginalValueGrid,
+    Progress,
+    RunSummary,
+    SetK,
+    TaskBatch,
+)
+from services.keys import RUN_ID, RUNS, SAMPLES_LIMIT, RunKeys
+from services.store import add_event
+
+
+def get_redis(request: Request) -> Redis:
+    return request.app.state.redis
+
+
+RedisDep = Annotated[Redis, Depends(get_redis)]
+RunId = Annotated[str, Path(pattern=RUN_ID.pattern, description="run id, as listed by /runs")]
+STREAM_ID = r"^(0|[0-9]{1,19}-[0-9]{1,19})$"  # fits Redis' 64-bit stream id parts
+
+router = APIRouter()
+bearer = HTTPBearer(auto_error=False)
+
+
+async def require_token(
+    request: Request,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
+) -> None:
+    token = request.app.state.settings.api_token
+    if token is None:
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            "changing a run is disabled: start the API with PARAMIMIC_API_TOKEN set",
+        )
+    if credentials is None or not secrets.compare_digest(
+        credentials.credentials.encode(), token.get_secret_value().encode()
+    ):
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "a valid bearer token is required",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+
+
+TokenDep = Depends(require_token)
+
+
+async def run_meta(r: Redis, run: str) -> tuple[RunKeys, dict]:
+    keys = RunKeys(run)
+    meta = await r.hgetall(keys.meta)
+    if not meta:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no run {run!r}; GET /runs lists them")
+    return keys, meta
+
+
+def _num(value: str | None, kind=float):
+    if value is None:
+        return None
+    v = json.loads(value)
+    return None if v is None else kind(v)
+
+
+@router.get("/health", response_model=Health, tags=["service"])
+async def health(r: RedisDep):
+    await r.ping()
+    return Health(status="ok", redis="ok")
+
+
+@router.get("/runs", response_model=list[RunSummary], tags=["runs"])
+async def list_runs(r: RedisDep):
+    """All runs, newest first."""
+    ids = await r.zrevrange(RUNS, 0, -1)
+    pipe = r.pipeline(transaction=False)
+    for run in ids:
+        keys = RunKeys(run)
+        pipe.hgetall(keys.meta)
+        pipe.hmget(keys.progress, ["iteration", "env_steps"])
+    replies = await pipe.execute()
+    runs = []
+    for run, meta, (iteration, env_steps) in zip(ids, replies[::2], replies[1::2], strict=True):
+        if not meta:
+            continue
+        runs.append(
+            RunSummary(
+                run_id=run,
+                name=meta.get("name", ""),
+                character=meta.get("character", ""),
+                status=meta.get("status", "unknown"),
+                started_at=float(meta.get("started_at", 0)),
+                updated_at=float(meta.get("updated_at", 0)),
+                iteration=_num(iteration, int),
+                env_steps=_num(env_steps, int),
+                total_steps=_num(meta.get("total_steps"), int),
+            )
+        )
+    return runs
+
+
+@router.get("/runs/{run}/progress", response_model=Progress, tags=["runs"])
+async def progress(run: RunId, r: RedisDep):
+    keys, meta = await run_meta(r, run)
+    p = await r.hgetall(keys.progress)
+    return Progress(
+        run_id=run,
+        status=meta.get("status", "unknown"),
+        iteration=_num(p.get("iteration"), int) or 0,
+        env_steps=_num(p.get("env_steps"), int) or 0,
+        total_steps=_num(meta.get("total_steps"), int),
+        episodes=_num(p.get("episodes_total"), int) or 0,
+        steps_per_second=_num(p.get("steps_per_second")),
+        mean_return=_num(p.get("mean_return")),
+        fall_percent=_num(p.get("fall_percent")),
+        updated_at=_num(p.get("updated_at")),
+    )
+
+
+@router.get("/runs/{run}/history", response_model=HistoryPage, tags=["runs"])
+async def history(
+    run: RunId,
+    r: RedisDep,
+    since: Annotated[int, Query(ge=0, le=2**53, description="records after this iteration")] = 0,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
+):
+    keys, _ = await run_meta(r, run)
+    raw = await r.zrangebyscore(keys.history, f"({since}", "+inf", start=0, num=limit)
+    items = [json.loads(x) for x in raw]
+    return HistoryPage(
+        run_id=run, items=items, next_since=items[-1]["iteration"] if items else since
+    )
+
+
+@router.get("/runs/{run}/curriculum", response_model=Curriculum, tags=["curriculum"])
+async def curriculum(run: RunId, r: RedisDep):
+    keys, _ = await run_meta(r, run)
+    summary, updated = await r.hmget(keys.curriculum, ["summary", "updated_at"])
+    if summary is None:
+        raise HTTPException(
+            status.HTTP_404_NOT_FOUND, f"run {run!r} has no curriculum state (no sampler yet)"
+        )
+    paused = await r.hget(keys.control, "paused")
+    return Curriculum(
+        run_id=run, paused=paused == "1", updated_at=_num(updated), **json.loads(summary)
+    )
+
+
+@router.get(
+    "/runs/{run}/curriculum/marginal-value", response_model=MarginalValueGrid, tags=["curriculum"]
+)
+async def marginal_value(run: RunId, r: RedisDep):
+    """V̄ over the two task dimensions the config displays (the others at the box centre)."""
+    keys, _ = await run_meta(r, run)
+    grid = await r.hget(keys.curriculum, "grid")
+    data = json.loads(grid) if grid else None
+    if not data:
+        return MarginalValueGrid(run_id=run, available=False)
+    return MarginalValueGrid(run_id=run, available=True, **data)
+
+
+@router.get("/runs/{run}/curriculum/samples", response_model=list[TaskBatch], tags=["curriculum"])
+async def samples(
+    run: RunId, r: RedisDep, limit: Annotated[int, Query(ge=1, le=SAMPLES_LIMIT)] = 20
+):
+    """The latest task batches the sampler handed out, newest first."""
+    keys, _ = await run_meta(r, run)
+    return [json.loads(x) for x in await r.lrange(keys.samples, 0, limit - 1)]
+
+
+@router.get("/runs/{run}/events", response_model=list[Event], tags=["runs"])
+async def events(
+    run: RunId,
+    r: RedisDep,
+    since: Annotated[
+        str, Query(pattern=STREAM_ID, description="events after this id (0: from the start)")
+    ] = "0",
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+):
+    """Restarts, checkpoints, pauses, k changes, ... oldest first."""
+    keys, _ = await run_meta(r, run)
+    start = "-" if since == "0" else f"({since}"
+    entries = await r.xrange(keys.events, min=start, max="+", count=limit)
+    return [
+        Event(
+            id=eid,
+            type=f.get("type", ""),
+            message=f.get("message", ""),
+            time=float(f.get("time", 0)),
+            data=json.loads(f.get("data", "{}")),
+        )
+        for eid, f in entries
+    ]
+
+
+async def _request(r: Redis, run: str, field: str, value, kind: str, message: str) -> Accepted:
+    keys, meta = await run_meta(r, run)
+    if meta.get("status") not in ("running", "paused"):
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run!r} is {meta.get('status')}")
+    pipe = r.pipeline(transaction=True)
+    pipe.hset(keys.control, field, value)
+    add_event(pipe, keys, kind, message)
+    await pipe.execute()
+    return Accepted(run_id=run, requested={field: value})
+
+
+@router.post(
+    "/runs/{run}/pause", response_model=Accepted, status_code=202, dependencies=[TokenDep],
+    tags=["control"],
+)  # fmt: skip
+async def pause(run: RunId, r: RedisDep):
+    """Ask the learner to pause after its current iteration (needs the bearer token)."""
+    return await _request(r, run, "paused", 1, "pause_requested", "pause requested via the API")
+
+
+@router.post(
+    "/runs/{run}/resume", response_model=Accepted, status_code=202, dependencies=[TokenDep],
+    tags=["control"],
+)  # fmt: skip
+async def resume(run: RunId, r: RedisDep):
+    """Ask a paused learner to go on (needs the bearer token)."""
+    return await _request(r, run, "paused", 0, "resume_requested", "resume requested via the API")
+
+
+@router.put(
+    "/runs/{run}/curriculum/k", response_model=Accepted, status_code=202,
+    dependencies=[TokenDep], tags=["control"],
+)  # fmt: skip
+async def set_k(run: RunId, body: SetK, r: RedisDep):
+    """Set the uniformity k of the adaptive sampling from the next iteration (needs the token)."""
+    message = f"k = {body.k:g} requested via the API"
+    return await _request(r, run, "k", body.k, "k_requested", message)

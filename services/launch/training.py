@@ -1,0 +1,244 @@
+"""`paramimic train`: start what a run needs, train, and stop everything that was started.
+
+Laptop default: an embedded Redis (data in the run directory), a local Ray, the sampler actor,
+the rollout actors, the learner (this process) and the API child process on 127.0.0.1:8000.
+`--redis-url` and `--ray-address` join existing ones instead; `--serial` runs the learner and one
+rollout worker in this process with an in-process curriculum (no Ray, Redis or API).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from paramimic.config import ExperimentConfig
+from services.learner import checkpoint
+from services.learner.trainer import SerialBackend, Trainer
+
+RUN_ID_FILE = "run_id"
+
+
+class LaunchError(RuntimeError):
+    """Something the user can fix (a busy port, an existing run); nothing was started."""
+
+
+@dataclass
+class LaunchOptions:
+    resume: bool = False
+    serial: bool = False
+    ray_address: str | None = None
+    redis_url: str | None = None
+    api: bool = True
+    api_host: str = "127.0.0.1"
+    api_port: int = 8000
+    api_token: str | None = None
+
+
+def run_id_for(run_dir: Path, cfg: ExperimentConfig, resume: bool) -> str:
+    """A run's id: made once, kept in the run directory, reused by --resume."""
+    path = run_dir / RUN_ID_FILE
+    if resume and path.exists():
+        return path.read_text().strip()
+    run_id = f"{cfg.name}-{time.strftime('%Y%m%d-%H%M%S')}-{os.urandom(2).hex()}"
+    path.write_text(run_id + "\n")
+    return run_id
+
+
+class StopFlag:
+    """Set by the first Ctrl-C or SIGTERM: finish the iteration, checkpoint, stop."""
+
+    def __init__(self, console: Console) -> None:
+        self.set = False
+        self.console = console
+
+    def __call__(self, signum, frame) -> None:
+        if not self.set:
+            self.console.print("[yellow]stopping after this iteration...[/]")
+        self.set = True
+
+
+def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -> int:
+    """Train; returns the process exit code (0 done or stopped, 3 all rollout actors lost)."""
+    run_dir = cfg.resolved_run_dir()
+    if not opts.resume and (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
+        raise LaunchError(f"{run_dir} already holds a run; pass --resume or another --run-dir")
+    state = None
+    if opts.resume:
+        try:
+            state = checkpoint.load(run_dir)
+        except FileNotFoundError as e:
+            raise LaunchError(str(e)) from e
+    api_port = opts.api_port
+    if not opts.serial and opts.api:
+        from services.launch.api_process import port_is_free
+        from services.launch.redis_server import free_port
+
+        if api_port == 0:
+            api_port = free_port(opts.api_host)
+        elif not port_is_free(opts.api_host, api_port):
+            raise LaunchError(
+                f"{opts.api_host}:{api_port} is in use; pass --api-port (0 = any free) or --no-api"
+            )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.yaml").write_text(
+        yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
+    )
+    stop = StopFlag(console)
+    handlers = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with ExitStack() as services:
+            if opts.serial:
+                return _train_serial(cfg, run_dir, state, stop, console)
+            return _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, services)
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+        console.print(f"checkpoint: {run_dir / 'checkpoints' / checkpoint.LATEST}")
+
+
+def _train_serial(cfg, run_dir, state, stop, console) -> int:
+    trainer = Trainer(cfg, run_dir)
+    if state is not None:
+        trainer.load_state_dict(state)
+        _say_resumed(trainer, console)
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    with _progress_bar(console, cfg.train.total_steps, trainer.progress.env_steps) as show:
+        trainer.train(backend, cfg.train.total_steps, on_metrics=show, should_stop=lambda: stop.set)
+    return 0
+
+
+def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, services) -> int:
+    import ray
+
+    from services.keys import sampler_actor_name
+    from services.launch.api_process import ApiProcess
+    from services.launch.redis_server import EmbeddedRedis
+    from services.learner.cluster import connect
+    from services.learner.ray_backend import AllActorsLost, RayBackend, SamplerClient
+    from services.learner.reporter import RunReporter
+    from services.sampler.actor import start_sampler
+
+    redis_url = opts.redis_url
+    if redis_url is None:
+        server = EmbeddedRedis(run_dir / "redis")
+        redis_url = server.start()
+        services.callback(server.stop)
+        console.print(f"Redis: embedded, {redis_url}, AOF in {server.data_dir}")
+    if connect(opts.ray_address):
+        services.callback(ray.shutdown)
+    run_id = run_id_for(run_dir, cfg, opts.resume)
+    reporter = RunReporter(redis_url, run_id)
+    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id)
+    services.callback(ray.kill, sampler)
+    trainer = Trainer(cfg, run_dir, SamplerClient(sampler))
+    if state is not None:
+        trainer.load_state_dict(state)  # the sampler takes the checkpoint's curriculum too
+        _say_resumed(trainer, console)
+    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
+    services.callback(backend.close)
+    console.print(
+        f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
+        f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"
+    )
+    api_url = None
+    if opts.api:
+        api = ApiProcess(redis_url, opts.api_host, api_port, opts.api_token, run_dir / "api.log")
+        api_url = api.start()
+        services.callback(api.stop)
+        console.print(f"API: {api_url}  (docs: {api_url}/docs, run id {run_id})")
+    reporter.start(cfg, run_dir, cfg.train.total_steps, api_url)
+
+    def before_iteration() -> None:
+        """Apply the API's requests: k now; a pause holds here until resumed or stopped."""
+        paused, k = reporter.take_control()
+        announced = False
+        while True:
+            if k is not None:
+                trainer.curriculum.set_k(k)
+            if not paused or stop.set:
+                break
+            if not announced:
+                reporter.set_status("paused", "training paused")
+                console.print("[yellow]paused (POST /runs/{run}/resume to go on)[/]")
+                announced = True
+            time.sleep(0.5)
+            paused, k = reporter.take_control()
+        if announced and not stop.set:
+            reporter.set_status("running", "training resumed")
+
+    def on_checkpoint(path: Path, iteration: int) -> None:
+        reporter.event("checkpoint", f"checkpoint at iteration {iteration}", {"path": str(path)})
+
+    status, code = "failed", 1
+    try:
+        with _progress_bar(console, cfg.train.total_steps, trainer.progress.env_steps) as show:
+
+            def on_metrics(m: dict) -> None:
+                reporter.progress(m)
+                show(m)
+
+            trainer.train(
+                backend,
+                cfg.train.total_steps,
+                on_metrics=on_metrics,
+                should_stop=lambda: stop.set,
+                before_iteration=before_iteration,
+                on_checkpoint=on_checkpoint,
+            )
+        status, code = ("stopped" if stop.set else "finished"), 0
+    except AllActorsLost as e:  # the checkpoint was written by Trainer.train on the way out
+        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
+        code = 3
+    finally:
+        try:
+            reporter.set_status(status, f"training {status} at iteration "
+                                        f"{trainer.progress.iteration}")  # fmt: skip
+        except Exception as e:  # Redis gone: the run's end is still in the checkpoint
+            console.print(f"[yellow]could not record the run's end in Redis: {e}[/]")
+    return code
+
+
+def _say_resumed(trainer: Trainer, console: Console) -> None:
+    console.print(
+        f"resumed at iteration {trainer.progress.iteration}, {trainer.progress.env_steps} env steps"
+    )
+
+
+class _progress_bar:
+    """A rich progress bar; the context value updates it from one iteration's metrics."""
+
+    def __init__(self, console: Console, total: int, completed: int) -> None:
+        self.bar = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+            TextColumn("{task.fields[info]}"),
+            TimeElapsedColumn(),
+            console=console,
+        )
+        self.task = self.bar.add_task("training", total=total, completed=completed, info="")
+
+    def __enter__(self):
+        self.bar.__enter__()
+        return self.show
+
+    def __exit__(self, *exc) -> None:
+        self.bar.__exit__(*exc)
+
+    def show(self, m: dict) -> None:
+        info = (
+            f"it {m['iteration']}  {m['steps_per_second']:,.0f} steps/s  "
+            f"return {m.get('mean_return', float('nan')):.2f}  "
+            f"fall {m.get('fall_percent', float('nan')):.0f}%"
+        )
+        if m.get("actor_restarts"):
+            info += f"  restarts {m['actor_restarts']}"
+        self.bar.update(self.task, completed=m["env_steps"], info=info)

@@ -1,0 +1,30 @@
+"""The sampler as a named Ray actor: restarted by Ray when its process dies, and then reloaded
+from Redis. Calls to it are retried by Ray (at least once), which ingestion tolerates."""
+
+from __future__ import annotations
+
+import os
+
+import ray
+
+from services.keys import RAY_NAMESPACE, sampler_actor_name
+from services.sampler.service import SamplerService
+
+
+@ray.remote(num_cpus=0, max_restarts=-1, max_task_retries=-1)
+class SamplerActor(SamplerService):
+    def __init__(self, config: dict, redis_url: str, run_id: str) -> None:
+        restarted = ray.get_runtime_context().was_current_actor_reconstructed
+        super().__init__(config, redis_url, run_id, restarted)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+
+def start_sampler(config: dict, redis_url: str, run_id: str):
+    """Create the run's named sampler actor and wait until it has loaded its state."""
+    handle = SamplerActor.options(name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE).remote(
+        config, redis_url, run_id
+    )
+    ray.get(handle.pid.remote())
+    return handle

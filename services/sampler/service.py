@@ -1,0 +1,157 @@
+"""The sampler: paramimic's curriculum with its state in Redis.
+
+Every call that changes the curriculum writes what changed in one MULTI/EXEC transaction before
+it returns, so an acknowledged change is in Redis (and, with AOF `appendfsync everysec`, on disk
+within a second). A sampler that starts again reloads that state and continues exactly where it
+was. After any (re)connection to Redis the next transaction rewrites the whole state, so a server
+that restarted and lost its last second of writes is brought up to date.
+
+Episode ingestion is idempotent by episode id (Ray retries calls at least once): ids already in
+the run's `seen` set are skipped, and the new ids are added in the same transaction as the
+counters they change.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections import deque
+from collections.abc import Iterable
+
+import numpy as np
+
+from paramimic.config import ExperimentConfig
+from paramimic.curriculum.adaptive import STATE_PARTS, AdaptiveCurriculum
+from paramimic.curriculum.marginal_value import Layers
+from services.keys import SAMPLES_LIMIT, RunKeys
+from services.store import add_event, connect
+
+RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
+GRID_SIZE = 21  # points per display dimension of the V̄ snapshot
+
+
+class SamplerService:
+    def __init__(
+        self,
+        config: dict,
+        redis_url: str,
+        run_id: str,
+        restarted: bool = False,
+        retry_seconds: float = 120.0,
+    ) -> None:
+        self.curriculum = AdaptiveCurriculum.from_config(ExperimentConfig.model_validate(config))
+        self.keys = RunKeys(run_id)
+        self.recent_ids: deque[str] = deque(maxlen=RECENT_IDS)
+        self.rewrite_all = True
+        self.redis = connect(redis_url, retry_seconds, on_connect=self._reconnected)
+        stored = self.redis.hmget(self.keys.curriculum, list(STATE_PARTS))
+        if all(v is not None for v in stored):  # a restart: continue where it was
+            self.curriculum.from_state(
+                {p: json.loads(v) for p, v in zip(STATE_PARTS, stored, strict=True)}
+            )
+            kind = "sampler_restarted" if restarted else "sampler_started"
+            self._commit(STATE_PARTS, event=(kind, "sampler reloaded its state from Redis"))
+        else:
+            self._commit(STATE_PARTS, event=("sampler_started", "sampler started fresh"))
+
+    def _reconnected(self) -> None:
+        self.rewrite_all = True
+
+    def _commit(
+        self,
+        parts: Iterable[str],
+        ops=None,
+        event: tuple[str, str] | None = None,
+    ) -> None:
+        """Write `parts` of the state (all of it after a reconnection), the public summary and
+        `ops(pipe)` in one transaction."""
+        for attempt in range(2):
+            full = self.rewrite_all
+            self.rewrite_all = False
+            wanted = STATE_PARTS if full else tuple(parts)
+            fields = {p: json.dumps(v) for p, v in self.curriculum.to_state(wanted).items()}
+            fields["summary"] = json.dumps(self.curriculum.summary())
+            fields["updated_at"] = f"{time.time():.3f}"
+            if "marginal" in wanted:
+                fields["grid"] = json.dumps(self.curriculum.marginal_grid(GRID_SIZE))
+            pipe = self.redis.pipeline(transaction=True)
+            pipe.hset(self.keys.curriculum, mapping=fields)
+            if full and self.recent_ids:
+                pipe.sadd(self.keys.seen, *self.recent_ids)
+            if ops is not None:
+                ops(pipe)
+            if event is not None:
+                add_event(pipe, self.keys, event[0], event[1], {"digest": self.digest()})
+            pipe.execute()
+            if not self.rewrite_all or attempt:
+                return  # else: the connection was re-established during execute; write it all
+
+    # --- the curriculum's calls ---------------------------------------------------------------
+
+    def next_tasks(self, n: int, source: str = "") -> np.ndarray:
+        """n task parameters for the episodes about to start: [n, d]."""
+        tasks = self.curriculum.next_tasks(int(n))
+        entry = json.dumps(
+            {
+                "time": time.time(),
+                "source": source,
+                "names": list(self.curriculum.space.names),
+                "tasks": tasks.tolist(),
+            }
+        )
+
+        def record(pipe) -> None:
+            pipe.lpush(self.keys.samples, entry)
+            pipe.ltrim(self.keys.samples, 0, SAMPLES_LIMIT - 1)
+
+        self._commit(("core",), record)
+        return tasks
+
+    def ingest(self, episodes: list[dict]) -> int:
+        """Count finished episodes once each (by `episode_id`); returns how many were new."""
+        unique = {e["episode_id"]: e for e in episodes}
+        if not unique:
+            return 0
+        ids = list(unique)
+        seen = self.redis.smismember(self.keys.seen, ids)
+        new = [unique[i] for i, s in zip(ids, seen, strict=True) if not s]
+        if not new:
+            return 0
+        new_ids = [e["episode_id"] for e in new]
+        self.curriculum.ingest(new)
+        self.recent_ids.extend(new_ids)
+        self._commit(("core",), lambda pipe: pipe.sadd(self.keys.seen, *new_ids))
+        return len(new)
+
+    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
+        """The learner's latest V̄ and μ; S is refilled by MCMC when `refill`."""
+        self.curriculum.update_marginal(layers, mu, iteration, refill)
+        parts = ("core", "marginal", "buffer") if refill else ("core", "marginal")
+        self._commit(parts)
+
+    def set_k(self, k: float) -> None:
+        old = self.curriculum.sampler.k
+        self.curriculum.set_k(k)
+        self._commit(("core",), event=("k_changed", f"k changed from {old:g} to {k:g}"))
+
+    # --- state ----------------------------------------------------------------------------------
+
+    def to_state(self) -> dict:
+        return self.curriculum.to_state()
+
+    def from_state(self, state: dict) -> None:
+        """Replace the state (a run resumed from a checkpoint)."""
+        self.curriculum.from_state(state)
+        self._commit(STATE_PARTS, event=("sampler_loaded", "sampler loaded a checkpoint's state"))
+
+    def summary(self) -> dict:
+        return self.curriculum.summary()
+
+    def digest(self) -> str:
+        """sha256 of the whole state: equal digests, equal samplers."""
+        blob = json.dumps(self.curriculum.to_state(), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()
+
+    def seen_count(self) -> int:
+        return int(self.redis.scard(self.keys.seen))

@@ -1,0 +1,89 @@
+"""Redis clients for the services: reconnect with backoff while a server restarts.
+
+A command that fails on a lost connection, a timeout or a server still loading its AOF is
+retried with exponential backoff for up to `retry_seconds`; after that the error propagates.
+Writes that the services retry are absolute (HSET, SADD, ZADD after a range delete), so a
+transaction applied twice leaves the same state.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+
+import redis
+from redis.backoff import ExponentialBackoff
+from redis.exceptions import BusyLoadingError
+from redis.exceptions import ConnectionError as RedisConnectionError
+from redis.exceptions import TimeoutError as RedisTimeoutError
+from redis.retry import Retry
+
+from services.keys import EVENTS_LIMIT, RunKeys
+
+RETRYABLE = (RedisConnectionError, RedisTimeoutError, BusyLoadingError, TimeoutError)
+BACKOFF_CAP = 0.5  # seconds between attempts, at most
+
+
+def connect(
+    url: str,
+    retry_seconds: float = 120.0,
+    on_connect: Callable[[], None] | None = None,
+) -> redis.Redis:
+    """A client for `url` (redis://[:password@]host:port/db or unix://path) that retries.
+
+    `on_connect` runs after every (re)connection, so that a caller can rewrite state a
+    restarted server may have lost.
+    """
+
+    def connected(conn) -> None:
+        conn.on_connect()
+        if on_connect is not None:
+            on_connect()
+
+    return redis.Redis.from_url(
+        url,
+        decode_responses=True,
+        socket_timeout=10.0,
+        socket_connect_timeout=2.0,
+        retry=Retry(
+            ExponentialBackoff(cap=BACKOFF_CAP, base=0.02),
+            retries=int(retry_seconds / BACKOFF_CAP) + 8,
+            supported_errors=RETRYABLE,
+        ),
+        retry_on_error=list(RETRYABLE),
+        redis_connect_func=connected,
+    )
+
+
+def wait_until_up(client: redis.Redis, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            client.ping()
+            return
+        except RETRYABLE:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
+def add_event(
+    pipe: redis.client.Pipeline | redis.Redis,
+    keys: RunKeys,
+    kind: str,
+    message: str,
+    data: dict | None = None,
+) -> None:
+    """Append one event (restart, phase change, checkpoint, ...) to the run's stream."""
+    pipe.xadd(
+        keys.events,
+        {
+            "type": kind,
+            "message": message,
+            "data": json.dumps(data or {}),
+            "time": f"{time.time():.3f}",
+        },
+        maxlen=EVENTS_LIMIT,
+        approximate=True,
+    )
