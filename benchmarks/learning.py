@@ -54,23 +54,28 @@ def _train_ours(
     )
     torch.manual_seed(cfg.train.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
-    trainer = Trainer(cfg, run_dir)
+    t0 = time.perf_counter()
     if on_ray:
         import ray
 
-        from services.learner.ray_backend import RayBackend
+        from services.launch.redis_server import EmbeddedRedis
+        from services.launch.stack import ray_stack
 
         ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
-        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-    else:
-        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-    t0 = time.perf_counter()
-    try:
-        trainer.train(backend, steps)
-    finally:
-        backend.close()
-        if on_ray:
+        try:
+            with (
+                EmbeddedRedis(run_dir / "redis") as server,
+                ray_stack(cfg, run_dir, server.url, f"bench-{run_dir.name}") as stack,
+            ):
+                trainer = stack.trainer
+                t0 = time.perf_counter()
+                trainer.train(stack.backend, steps)
+        finally:
             ray.shutdown()
+    else:
+        trainer = Trainer(cfg, run_dir)
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+        trainer.train(backend, steps)
     train_seconds = time.perf_counter() - t0
     report = evaluate(
         deterministic(trainer.learner.policy),

@@ -30,8 +30,8 @@ import ray
 
 from paramimic.config import ExperimentConfig, load_config
 from paramimic.envs import make_env
-from services.learner.ray_backend import RayBackend
-from services.learner.trainer import Trainer
+from services.launch.redis_server import EmbeddedRedis
+from services.launch.stack import ray_stack
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
@@ -50,23 +50,21 @@ def raw_steps_per_s(cfg: ExperimentConfig, steps: int = 4000) -> float:
     return steps / (time.perf_counter() - t)
 
 
-def actor_steps_per_s(cfg, trainer, n_actors: int, use_policy: bool, rounds: int) -> dict:
-    """(b)-(d): fragments from n actors at once, after one warm-up fragment each."""
+def actor_steps_per_s(cfg, redis_url: str, n_actors: int, use_policy: bool, rounds: int) -> dict:
+    """(b)-(d): fragments from n actors at once (tasks from the sampler actor, episodes reported
+    to it, as in training), after one warm-up fragment each."""
     cfg = cfg.model_copy(deep=True)
     cfg.actors.num_actors = n_actors
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-    try:
-        weights = [ray.put(trainer.learner.weights())]
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        ray_stack(cfg, Path(tmp), redis_url, f"bench-actors-{n_actors}-{use_policy}") as stack,
+    ):
+        backend = stack.backend
+        weights = [ray.put(stack.trainer.learner.weights())]
 
         def round_trip() -> int:
             refs = [
-                a.sample.remote(
-                    weights,
-                    0,
-                    backend.steps,
-                    trainer.sampler.next_tasks(backend.n_tasks),
-                    use_policy,
-                )
+                a.sample.remote(weights, 0, backend.steps, backend.n_tasks, use_policy)
                 for a in backend.actors
             ]
             return sum(f.num_steps for f in ray.get(refs))
@@ -76,32 +74,28 @@ def actor_steps_per_s(cfg, trainer, n_actors: int, use_policy: bool, rounds: int
         steps = sum(round_trip() for _ in range(rounds))
         dt = time.perf_counter() - t
         rss = ray.get([a.peak_rss_mb.remote() for a in backend.actors])
-    finally:
-        backend.close()
     return {"steps_per_s": steps / dt, "actors": n_actors, "peak_rss_mb_per_actor": max(rss)}
 
 
-def training_steps_per_s(cfg, mode: str, iterations: int) -> dict:
+def training_steps_per_s(cfg, redis_url: str, mode: str, iterations: int) -> dict:
     """(e): whole iterations of the trainer on Ray, after one warm-up iteration."""
     cfg = cfg.model_copy(deep=True)
     cfg.actors.mode = mode
-    with tempfile.TemporaryDirectory() as tmp:
-        trainer = Trainer(cfg, Path(tmp))
-        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-        actors = backend.num_actors
-        try:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        ray_stack(cfg, Path(tmp), redis_url, f"bench-training-{mode}") as stack,
+    ):
+        trainer, backend = stack.trainer, stack.backend
+        trainer.iteration(backend)
+        steps0 = trainer.progress.env_steps
+        t = time.perf_counter()
+        for _ in range(iterations):
             trainer.iteration(backend)
-            steps0 = trainer.progress.env_steps
-            t = time.perf_counter()
-            for _ in range(iterations):
-                trainer.iteration(backend)
-            dt = time.perf_counter() - t
-        finally:
-            backend.close()
+        dt = time.perf_counter() - t
     return {
         "steps_per_s": (trainer.progress.env_steps - steps0) / dt,
         "mode": mode,
-        "actors": actors,
+        "actors": backend.num_actors,
         "iterations": iterations,
     }
 
@@ -162,13 +156,13 @@ def main() -> None:
         log_to_driver=False,
     )
     try:
-        with tempfile.TemporaryDirectory() as tmp:
-            trainer = Trainer(cfg, Path(tmp))
-            rows["b_1_actor_no_policy"] = actor_steps_per_s(cfg, trainer, 1, False, args.rounds)
-            rows["c_1_actor_policy"] = actor_steps_per_s(cfg, trainer, 1, True, args.rounds)
-            rows["d_2_actors_policy"] = actor_steps_per_s(cfg, trainer, 2, True, args.rounds)
-        for mode in ("sync", "pipelined"):
-            rows[f"e_training_{mode}"] = training_steps_per_s(cfg, mode, args.iterations)
+        with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as redis_server:
+            url = redis_server.url
+            rows["b_1_actor_no_policy"] = actor_steps_per_s(cfg, url, 1, False, args.rounds)
+            rows["c_1_actor_policy"] = actor_steps_per_s(cfg, url, 1, True, args.rounds)
+            rows["d_2_actors_policy"] = actor_steps_per_s(cfg, url, 2, True, args.rounds)
+            for mode in ("sync", "pipelined"):
+                rows[f"e_training_{mode}"] = training_steps_per_s(cfg, url, mode, args.iterations)
     finally:
         ray.shutdown()
     rows["learner_peak_rss_mb"] = {

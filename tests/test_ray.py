@@ -4,22 +4,29 @@ import os
 import signal
 import threading
 import time
+from contextlib import ExitStack
 
 import numpy as np
 import pytest
 import ray
 
 from paramimic.config import ExperimentConfig
+from services.launch.stack import ray_stack
 from services.learner import checkpoint
-from services.learner.ray_backend import RayBackend
 from services.learner.trainer import SerialBackend, Trainer
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    ray.init(num_cpus=3, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
-    yield
-    ray.shutdown()
+@pytest.fixture
+def distributed(local_ray, redis_server, run_id):
+    """make(cfg, run_dir) -> (trainer, backend): a sampler actor (state in the real Redis) and
+    the rollout actors; everything made is stopped after the test."""
+    with ExitStack() as made:
+
+        def make(cfg: ExperimentConfig, run_dir, suffix=""):
+            stack = made.enter_context(ray_stack(cfg, run_dir, redis_server.url, run_id + suffix))
+            return stack.trainer, stack.backend
+
+        yield make
 
 
 def _cfg(**actors) -> ExperimentConfig:
@@ -36,32 +43,30 @@ def _cfg(**actors) -> ExperimentConfig:
     )
 
 
-def test_two_actors_deliver_fragments_and_training_advances(local_ray, tmp_path):
+def test_two_actors_deliver_fragments_and_training_advances(distributed, tmp_path):
     cfg = _cfg()
-    trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
-    try:
-        assert backend.num_actors == 2 and backend.steps == 32  # 256 / (2 actors x 4 envs)
-        frags = backend.collect(trainer.learner.weights(), trainer.learner.version)
-        assert len(frags) == 2
-        for f in frags:
-            assert f.obs.shape == (32, 4, trainer.obs_dim)
-            assert f.actions.shape == (32, 4, trainer.act_dim)
-            assert f.rewards.shape == f.dphi.shape == f.terminated.shape == (32, 4)
-            assert f.policy_version == 0
-        assert {e.episode_id.split("-")[0] for f in frags for e in f.episodes} <= {"w0", "w1"}
-        trainer.train(backend, total_steps=3 * 256)
-        assert trainer.progress.iteration == 3
-        assert trainer.progress.env_steps == 3 * 256
-        assert backend.stats()["actor_restarts"] == 0
-    finally:
-        backend.close()
+    trainer, backend = distributed(cfg, tmp_path)
+    assert backend.num_actors == 2 and backend.steps == 32  # 256 / (2 actors x 4 envs)
+    frags = backend.collect(trainer.learner.weights(), trainer.learner.version)
+    assert len(frags) == 2
+    for f in frags:
+        assert f.obs.shape == (32, 4, trainer.obs_dim)
+        assert f.actions.shape == (32, 4, trainer.act_dim)
+        assert f.rewards.shape == f.dphi.shape == f.terminated.shape == (32, 4)
+        assert f.policy_version == 0
+    assert {e.episode_id.split("-")[1] for f in frags for e in f.episodes} <= {"w0", "w1"}
+    trainer.train(backend, total_steps=3 * 256)
+    assert trainer.progress.iteration == 3
+    assert trainer.progress.env_steps == 3 * 256
+    assert backend.stats()["actor_restarts"] == 0
+    # the actors reported every finished episode to the sampler
+    episodes = trainer.progress.episodes + sum(len(f.episodes) for f in frags)
+    assert trainer.curriculum.summary()["episodes"] == episodes
 
 
-def test_killed_actor_is_restarted_and_the_run_finishes(local_ray, tmp_path):
+def test_killed_actor_is_restarted_and_the_run_finishes(distributed, tmp_path):
     cfg = _cfg(steps_per_fragment=150)  # fragments long enough to be killed in the middle
-    trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    trainer, backend = distributed(cfg, tmp_path)
     victim = backend.pids()[0]
     first_done = threading.Event()
     metrics = []
@@ -91,7 +96,7 @@ def test_killed_actor_is_restarted_and_the_run_finishes(local_ray, tmp_path):
         assert metrics[-1]["actor_restarts"] == 1
         assert victim not in _pids_when_back(backend)  # a new process took the actor's place
     finally:
-        backend.close()
+        thread.join(timeout=600)
 
 
 def _pids_when_back(backend, timeout=120.0):
@@ -106,15 +111,11 @@ def _pids_when_back(backend, timeout=120.0):
             time.sleep(0.5)
 
 
-def test_resume_restores_identical_state(local_ray, tmp_path):
+def test_resume_restores_identical_state(distributed, tmp_path):
     cfg = _cfg()
-    first = Trainer(cfg, tmp_path)
-    backend = RayBackend(cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks)
-    try:
-        first.train(backend, total_steps=2 * 256)
-    finally:
-        backend.close()
-    second = Trainer(cfg, tmp_path)
+    first, backend = distributed(cfg, tmp_path)
+    first.train(backend, total_steps=2 * 256)
+    second, _ = distributed(cfg, tmp_path, suffix="-resumed")
     second.load_state_dict(checkpoint.load(tmp_path))
     a, b = first.learner.state_dict(), second.learner.state_dict()
     for k in a["policy"]:
@@ -125,47 +126,42 @@ def test_resume_restores_identical_state(local_ray, tmp_path):
                 assert t.numpy().tobytes() == b[group]["state"][sid][name].numpy().tobytes()
     np.testing.assert_array_equal(a["normalizer"]["mean"], b["normalizer"]["mean"])
     assert second.progress.iteration == 2
-    assert second.sampler.to_state() == first.sampler.to_state()
+    assert second.curriculum.to_state() == first.curriculum.to_state()
 
 
-def test_serial_and_ray_give_the_same_fragments(local_ray, tmp_path):
+def test_serial_and_ray_give_the_same_fragments(distributed, tmp_path):
     cfg = _cfg(num_actors=1)
     a = Trainer(cfg, tmp_path / "serial")
-    b = Trainer(cfg, tmp_path / "ray")
+    b, remote = distributed(cfg, tmp_path / "ray")
     b.learner.policy.load_state_dict(a.learner.policy.state_dict())
-    serial = SerialBackend(cfg, a.obs_dim, a.act_dim, a.sampler.next_tasks)
-    remote = RayBackend(cfg, b.obs_dim, b.act_dim, b.sampler.next_tasks)
-    try:
-        for _ in range(2):
-            [fs] = serial.collect(a.learner.weights(), 0)
-            [fr] = remote.collect(b.learner.weights(), 0)
-            for name in (
-                "obs",
-                "actions",
-                "logp",
-                "values",
-                "next_values",
-                "rewards",
-                "terminated",
-                "truncated",
-                "task_index",
-                "tasks",
-            ):
-                np.testing.assert_array_equal(getattr(fs, name), getattr(fr, name), name)
-            assert [e.to_dict() for e in fs.episodes] == [e.to_dict() for e in fr.episodes]
-    finally:
-        remote.close()
+    serial = SerialBackend(cfg, a.obs_dim, a.act_dim, a.curriculum)
+    for _ in range(2):
+        [fs] = serial.collect(a.learner.weights(), 0)
+        [fr] = remote.collect(b.learner.weights(), 0)
+        for name in (
+            "obs",
+            "actions",
+            "logp",
+            "values",
+            "next_values",
+            "rewards",
+            "terminated",
+            "truncated",
+            "task_index",
+            "tasks",
+        ):
+            np.testing.assert_array_equal(getattr(fs, name), getattr(fr, name), name)
+        # the same episodes; only the ids differ (a Ray actor's carry a per-process token)
+        strip = [{**e.to_dict(), "episode_id": None} for e in fs.episodes]
+        assert strip == [{**e.to_dict(), "episode_id": None} for e in fr.episodes]
+    assert a.curriculum.to_state() == b.curriculum.to_state()  # the same sampler state
 
 
-def test_pipelined_mode_samples_during_the_update(local_ray, tmp_path):
+def test_pipelined_mode_samples_during_the_update(distributed, tmp_path):
     cfg = _cfg(mode="pipelined")
-    trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    trainer, backend = distributed(cfg, tmp_path)
     metrics = []
-    try:
-        trainer.train(backend, total_steps=4 * 256, on_metrics=metrics.append)
-    finally:
-        backend.close()
+    trainer.train(backend, total_steps=4 * 256, on_metrics=metrics.append)
     assert [m["policy_lag"] for m in metrics] == [0.0, 1.0, 1.0, 1.0]  # one version behind
 
 
@@ -176,17 +172,13 @@ def test_auto_sizes_the_pool_from_the_cluster_cpus(local_ray):
     assert resolve_num_actors(5) == 5
 
 
-def test_all_actors_gone_raises_after_the_timeout(local_ray, tmp_path):
+def test_all_actors_gone_raises_after_the_timeout(distributed, tmp_path):
     from services.learner.ray_backend import AllActorsLost
 
     cfg = _cfg(lost_timeout=2.0)
-    trainer = Trainer(cfg, tmp_path)
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    trainer, backend = distributed(cfg, tmp_path)
     for actor in backend.actors:
         ray.kill(actor, no_restart=True)
-    try:
-        with pytest.raises(AllActorsLost, match="no rollout actor delivered"):
-            trainer.train(backend, total_steps=10**6)
-    finally:
-        backend.close()
+    with pytest.raises(AllActorsLost, match="no rollout actor delivered"):
+        trainer.train(backend, total_steps=10**6)
     assert checkpoint.load(tmp_path)["progress"]["iteration"] == 0  # checkpointed on the way out

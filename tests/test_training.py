@@ -43,7 +43,7 @@ def test_short_training_run_improves_the_return(tmp_path):
     cfg = _config()
     trainer = Trainer(cfg, tmp_path)
     before = _eval_return(trainer, cfg)
-    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.sampler.next_tasks)
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
     trainer.train(backend, total_steps=25 * 4096)
     after = _eval_return(trainer, cfg)
     # the initial policy falls within ~2 s; after 100k steps it must stay up markedly longer
@@ -79,10 +79,10 @@ def test_checkpoint_resume_restores_everything(tmp_path):
         }
     )
     first = Trainer(cfg, tmp_path)
-    backend = SerialBackend(cfg, first.obs_dim, first.act_dim, first.sampler.next_tasks)
+    backend = SerialBackend(cfg, first.obs_dim, first.act_dim, first.curriculum)
     first.train(backend, total_steps=3 * 256)
     assert first.progress.iteration == 3
-    assert first.sampler.adaptive  # V̄ was fitted and S refilled by MCMC
+    assert first.curriculum.sampler.adaptive  # V̄ was fitted and S refilled by MCMC
     saved = checkpoint.load(tmp_path)
     assert saved["progress"]["iteration"] == 3
 
@@ -90,9 +90,9 @@ def test_checkpoint_resume_restores_everything(tmp_path):
     second.load_state_dict(saved)
     _assert_same_state(first.state_dict()["learner"], second.state_dict()["learner"])
     _assert_same_state(first.marginal.to_state(), second.marginal.to_state())
-    _assert_same_state(first.sampler.to_state(), second.sampler.to_state())
-    np.testing.assert_array_equal(first.sampler.next_tasks(5), second.sampler.next_tasks(5))
-    backend2 = SerialBackend(cfg, second.obs_dim, second.act_dim, second.sampler.next_tasks)
+    _assert_same_state(first.curriculum.to_state(), second.curriculum.to_state())
+    np.testing.assert_array_equal(first.curriculum.next_tasks(5), second.curriculum.next_tasks(5))
+    backend2 = SerialBackend(cfg, second.obs_dim, second.act_dim, second.curriculum)
     second.train(backend2, total_steps=4 * 256)
     assert second.progress.iteration == 4  # the counter continues
     assert (tmp_path / "checkpoints" / "ckpt_000004.pt").is_file()

@@ -118,13 +118,12 @@ def _train_serial(cfg, run_dir, state, stop, console) -> int:
 def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, services) -> int:
     import ray
 
-    from services.keys import sampler_actor_name
     from services.launch.api_process import ApiProcess
     from services.launch.redis_server import EmbeddedRedis
+    from services.launch.stack import ray_stack
     from services.learner.cluster import connect
-    from services.learner.ray_backend import AllActorsLost, RayBackend, SamplerClient
+    from services.learner.ray_backend import AllActorsLost
     from services.learner.reporter import RunReporter
-    from services.sampler.actor import start_sampler
 
     redis_url = opts.redis_url
     if redis_url is None:
@@ -136,14 +135,11 @@ def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, servi
         services.callback(ray.shutdown)
     run_id = run_id_for(run_dir, cfg, opts.resume)
     reporter = RunReporter(redis_url, run_id)
-    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id)
-    services.callback(ray.kill, sampler)
-    trainer = Trainer(cfg, run_dir, SamplerClient(sampler))
+    stack = services.enter_context(ray_stack(cfg, run_dir, redis_url, run_id))
+    trainer, backend = stack.trainer, stack.backend
     if state is not None:
         trainer.load_state_dict(state)  # the sampler takes the checkpoint's curriculum too
         _say_resumed(trainer, console)
-    backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
-    services.callback(backend.close)
     console.print(
         f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
         f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"

@@ -1,0 +1,43 @@
+"""The distributed training stack of one run on a connected Ray: the named sampler actor (state
+in Redis), a Trainer that talks to it, and the rollout actors. Used by the launcher, the
+benchmarks and the tests."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import ray
+
+from paramimic.config import ExperimentConfig
+from services.keys import sampler_actor_name
+from services.learner.ray_backend import RayBackend, SamplerClient
+from services.learner.trainer import Trainer
+from services.sampler.actor import start_sampler
+
+
+@dataclass
+class RayStack:
+    trainer: Trainer
+    backend: RayBackend
+    sampler: ray.actor.ActorHandle
+    run_id: str
+
+
+@contextmanager
+def ray_stack(
+    cfg: ExperimentConfig, run_dir: Path, redis_url: str, run_id: str
+) -> Iterator[RayStack]:
+    """Start the sampler and the rollout actors; kill them on exit."""
+    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id)
+    try:
+        trainer = Trainer(cfg, run_dir, SamplerClient(sampler))
+        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
+        try:
+            yield RayStack(trainer, backend, sampler, run_id)
+        finally:
+            backend.close()
+    finally:
+        ray.kill(sampler)

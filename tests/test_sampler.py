@@ -1,0 +1,204 @@
+"""The sampler service: its state in a real Redis, idempotent ingestion, and surviving a kill -9
+of itself (a real Ray actor) and of the Redis server (AOF) during real training runs."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+import ray
+import redis
+
+from paramimic.config import ExperimentConfig
+from services.keys import RunKeys
+from services.launch.redis_server import EmbeddedRedis
+from services.launch.stack import ray_stack
+from services.sampler.service import SamplerService
+
+CFG = {
+    "character": "hopper",
+    "task": {"leg_length": [0.8, 1.2], "torso_length": [0.9, 1.1], "target_velocity": [1, 1]},
+    "env": {"max_episode_seconds": 1.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+    "curriculum": {"k": 10.0, "p_mcmc": 1, "n_mcmc": 100},
+    "actors": {"num_actors": 2, "num_envs": 4},
+    "train": {"checkpoint_every": 100, "seed": 3},
+}
+
+
+def _cfg(**actors) -> ExperimentConfig:
+    return ExperimentConfig.model_validate({**CFG, "actors": {**CFG["actors"], **actors}})
+
+
+def _episode(i: int, ret: float = 10.0) -> dict:
+    return {
+        "episode_id": f"ep-{i}",
+        "task": [1.0, 1.0, 1.0],
+        "return": ret,
+        "length": 50,
+        "fell": i % 2 == 0,
+        "diverged": False,
+        "reward_terms": {},
+    }
+
+
+def _layers(seed: int = 0) -> list:
+    rng = np.random.default_rng(seed)
+    return [
+        (rng.normal(size=(3, 8)), rng.normal(size=8)),
+        (rng.normal(size=(8, 1)), np.array([5.0])),
+    ]
+
+
+def test_ingesting_the_same_summaries_twice_changes_nothing(redis_server, run_id):
+    sampler = SamplerService(_cfg().model_dump(mode="json"), redis_server.url, run_id)
+    batch = [_episode(i) for i in range(5)]
+    assert sampler.ingest(batch) == 5
+    digest, seen = sampler.digest(), sampler.seen_count()
+    assert sampler.ingest(batch) == 0  # a retried call
+    assert sampler.ingest(batch[2:] + batch[:1]) == 0  # any subset, any order
+    assert sampler.digest() == digest and sampler.seen_count() == seen == 5
+    # a batch with one new episode and a duplicate of it counts it once
+    assert sampler.ingest([_episode(9, 1.0), _episode(9, 1.0), batch[0]]) == 1
+    summary = sampler.summary()
+    assert summary["episodes"] == 6
+    assert summary["mean_return"] == pytest.approx((5 * 10.0 + 1.0) / 6)
+    assert summary["fall_percent"] == pytest.approx(100 * 3 / 6)  # ep-0, 2, 4 fell
+
+
+def test_a_new_sampler_on_the_same_run_continues_exactly_where_it_was(redis_server, run_id):
+    config = _cfg().model_dump(mode="json")
+    a = SamplerService(config, redis_server.url, run_id)
+    a.next_tasks(7, "actor0")
+    a.update_marginal(_layers(), mu=5.0, iteration=3, refill=True)
+    a.ingest([_episode(i) for i in range(4)])
+    a.next_tasks(3, "actor1")
+    a.set_k(2.5)
+    b = SamplerService(config, redis_server.url, run_id, restarted=True)
+    assert b.digest() == a.digest()
+    assert b.curriculum.sampler.adaptive and b.curriculum.sampler.k == 2.5
+    np.testing.assert_array_equal(a.next_tasks(5), b.next_tasks(5))  # the same rng state too
+    # every change was one transaction: the stored parts, the summary and the grid agree
+    stored = redis.Redis.from_url(redis_server.url, decode_responses=True).hgetall(
+        RunKeys(run_id).curriculum
+    )
+    assert json.loads(stored["summary"])["k"] == 2.5
+    grid = json.loads(stored["grid"])
+    assert grid["dims"] == ["leg_length", "torso_length"] and len(grid["values"]) == 21
+
+
+class Gate:
+    """Holds the learner before its next iteration while closed; `held` says it is waiting."""
+
+    def __init__(self) -> None:
+        self.open_ = threading.Event()
+        self.open_.set()
+        self.held = threading.Event()
+
+    def __call__(self) -> None:
+        if not self.open_.is_set():
+            self.held.set()
+        self.open_.wait()
+
+
+def _train_in_thread(stack, total_steps, gate=None):
+    """Run stack.trainer.train in a thread, held by `gate` before each iteration."""
+    errors: list[Exception] = []
+    metrics: list[dict] = []
+
+    def run():
+        try:
+            stack.trainer.train(
+                stack.backend, total_steps, on_metrics=metrics.append, before_iteration=gate
+            )
+        except Exception as e:  # surfaced by the caller's assertions
+            errors.append(e)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, metrics, errors
+
+
+def _wait_for(predicate, timeout=120.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.1)
+
+
+def _events(url: str, run_id: str) -> list[str]:
+    r = redis.Redis.from_url(url, decode_responses=True)
+    return [f["type"] for _, f in r.xrange(RunKeys(run_id).events)]
+
+
+def test_kill_9_of_the_sampler_actor_loses_nothing(local_ray, redis_server, run_id, tmp_path):
+    cfg = _cfg(steps_per_fragment=100)
+    gate = Gate()
+    with ray_stack(cfg, tmp_path, redis_server.url, run_id) as stack:
+        total = 8 * 2 * 4 * 100
+        thread, metrics, errors = _train_in_thread(stack, total, gate)
+        _wait_for(lambda: len(metrics) >= 2, what="two iterations")
+        # 1) at rest (the learner held before an iteration): the restarted sampler's state
+        #    equals the state before the kill
+        gate.open_.clear()
+        _wait_for(gate.held.is_set, what="the learner to hold")  # sync mode: no call in flight
+        n = len(metrics)
+        before = ray.get(stack.sampler.digest.remote())
+        pid = ray.get(stack.sampler.pid.remote())
+        os.kill(pid, signal.SIGKILL)
+        assert ray.get(stack.sampler.pid.remote(), timeout=120) != pid  # restarted by Ray
+        assert ray.get(stack.sampler.digest.remote()) == before
+        assert "sampler_restarted" in _events(redis_server.url, run_id)
+        # 2) mid-fragment: actors are calling it; Ray retries their calls on the new sampler
+        gate.open_.set()
+        _wait_for(lambda: len(metrics) >= n + 2, what="training to go on")
+        time.sleep(0.3)
+        os.kill(ray.get(stack.sampler.pid.remote()), signal.SIGKILL)
+        thread.join(timeout=600)
+        assert not thread.is_alive() and not errors, errors
+        assert stack.trainer.progress.env_steps >= total
+        # every finished episode reached the sampler exactly once, retries or not
+        summary = stack.trainer.curriculum.summary()
+        assert summary["episodes"] == stack.trainer.progress.episodes
+        assert ray.get(stack.sampler.seen_count.remote()) == summary["episodes"]
+    assert _events(redis_server.url, run_id).count("sampler_restarted") == 2
+
+
+def test_a_redis_restart_during_a_run_loses_nothing_acknowledged(local_ray, run_id, tmp_path):
+    server = EmbeddedRedis(tmp_path / "redis")
+    server.start()
+    try:
+        cfg = _cfg(steps_per_fragment=100)
+        with ray_stack(cfg, tmp_path, server.url, run_id) as stack:
+            thread, metrics, errors = _train_in_thread(stack, 10 * 2 * 4 * 100)
+            _wait_for(lambda: len(metrics) >= 2, what="two iterations")
+            client = redis.Redis.from_url(server.url, decode_responses=True)
+            acknowledged = client.smembers(RunKeys(run_id).seen)
+            episodes_before = json.loads(client.hget(RunKeys(run_id).curriculum, "summary"))[
+                "episodes"
+            ]
+            client.close()
+            time.sleep(1.5)  # past the next `appendfsync everysec`
+            server.kill()  # SIGKILL: no shutdown fsync
+            time.sleep(1.0)
+            server.start()  # same port, same AOF
+            thread.join(timeout=600)
+            assert not thread.is_alive() and not errors, errors
+            assert len(metrics) == 10  # training went on through the outage
+            client = redis.Redis.from_url(server.url, decode_responses=True)
+            keys = RunKeys(run_id)
+            assert all(client.smismember(keys.seen, list(acknowledged)))
+            summary = json.loads(client.hget(keys.curriculum, "summary"))
+            assert summary["episodes"] >= episodes_before
+            # the sampler rewrote its state after reconnecting: Redis agrees with it
+            assert summary == stack.trainer.curriculum.summary()
+            assert client.scard(keys.seen) == summary["episodes"] == stack.trainer.progress.episodes
+            client.close()
+    finally:
+        server.stop()
