@@ -1,0 +1,239 @@
+"""The progress API: a real uvicorn (`paramimic api`) on loopback over a real Redis holding a run
+written by the real reporter and sampler service; schemathesis over its OpenAPI schema."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from paramimic.config import ExperimentConfig
+from services.launch.api_process import ApiProcess
+from services.launch.redis_server import free_port
+from services.learner.reporter import RunReporter
+from services.sampler.service import SamplerService
+
+TOKEN = "test-token-123"
+CFG = {
+    "name": "api-test",
+    "character": "hopper",
+    "task": {"leg_length": [0.8, 1.2], "torso_length": [0.9, 1.1], "target_velocity": [1, 1]},
+    "curriculum": {"n_mcmc": 50},
+}
+
+
+def _api(redis_server, tmp_path_factory, token):
+    api = ApiProcess(
+        redis_server.url, "127.0.0.1", free_port(), token,
+        tmp_path_factory.mktemp("api") / "api.log",
+    )  # fmt: skip
+    api.start()
+    return api
+
+
+@pytest.fixture(scope="module")
+def api(redis_server, tmp_path_factory):
+    api = _api(redis_server, tmp_path_factory, TOKEN)
+    yield api.url
+    api.stop()
+
+
+@pytest.fixture(scope="module")
+def api_without_token(redis_server, tmp_path_factory):
+    api = _api(redis_server, tmp_path_factory, None)
+    yield api.url
+    api.stop()
+
+
+@pytest.fixture(scope="module")
+def run(redis_server, tmp_path_factory):
+    """A run as the learner and the sampler write it: 3 iterations, V̄, tasks, episodes."""
+    cfg = ExperimentConfig.model_validate(CFG)
+    run_id = "api-test-run"
+    reporter = RunReporter(redis_server.url, run_id)
+    reporter.start(cfg, tmp_path_factory.mktemp("run"), 3000, None)
+    sampler = SamplerService(cfg.model_dump(mode="json"), redis_server.url, run_id)
+    rng = np.random.default_rng(0)
+    layers = [(rng.normal(size=(3, 8)), rng.normal(size=8)), (rng.normal(size=(8, 1)), [4.0])]
+    for it in range(1, 4):
+        sampler.next_tasks(4, f"actor{it % 2}")
+        sampler.update_marginal(layers, 4.0, it, refill=True)
+        sampler.ingest(
+            [
+                {
+                    "episode_id": f"e{it}-{j}",
+                    "task": [1, 1, 1],
+                    "return": 10.0 * it,
+                    "length": 30,
+                    "fell": j == 0,
+                    "diverged": False,
+                    "reward_terms": {},
+                }
+                for j in range(2)
+            ]  # fmt: skip
+        )
+        reporter.progress(
+            {
+                "iteration": it,
+                "env_steps": 1000 * it,
+                "episodes_total": 2 * it,
+                "steps_per_second": 2500.0,
+                "mean_return": 10.0 * it,
+                "fall_percent": 50.0,
+                "policy_loss": float("nan"),
+            }  # fmt: skip
+        )
+    reporter.event("checkpoint", "checkpoint at iteration 3", {"path": "x"})
+    return run_id
+
+
+def test_every_read_endpoint(api, run):
+    with httpx.Client(base_url=api) as c:
+        assert c.get("/health").json() == {"status": "ok", "redis": "ok"}
+        runs = c.get("/runs").json()
+        mine = next(r for r in runs if r["run_id"] == run)
+        assert mine["status"] == "running" and mine["iteration"] == 3
+        p = c.get(f"/runs/{run}/progress").json()
+        assert (p["iteration"], p["env_steps"], p["episodes"], p["total_steps"]) == (
+            3,
+            3000,
+            6,
+            3000,
+        )
+        assert p["mean_return"] == 30.0 and p["fall_percent"] == 50.0
+
+        h = c.get(f"/runs/{run}/history").json()
+        assert [x["iteration"] for x in h["items"]] == [1, 2, 3] and h["next_since"] == 3
+        assert h["items"][0]["policy_loss"] is None  # NaN is stored as null
+        assert [x["iteration"] for x in c.get(f"/runs/{run}/history?since=1").json()["items"]] == [
+            2,
+            3,
+        ]
+        assert c.get(f"/runs/{run}/history?since=3").json()["items"] == []
+
+        cur = c.get(f"/runs/{run}/curriculum").json()
+        assert cur["mode"] == "adaptive" and cur["k"] == 10.0 and cur["mu"] == 4.0
+        assert cur["refills"] == 3 and cur["buffer_adaptive"] and cur["buffer_size"] == 50
+        assert cur["episodes"] == 6 and cur["tasks_served"] == 12 and not cur["paused"]
+        assert cur["phase"] is None  # [L21] phases arrive with Part 4
+
+        g = c.get(f"/runs/{run}/curriculum/marginal-value").json()
+        assert g["available"] and g["dims"] == ["leg_length", "torso_length"]
+        assert len(g["xs"]) == len(g["ys"]) == 21 and len(g["values"]) == 21
+        assert len(g["values"][0]) == 21 and g["iteration"] == 3
+
+        s = c.get(f"/runs/{run}/curriculum/samples?limit=2").json()
+        assert len(s) == 2 and s[0]["source"] == "actor1" and len(s[0]["tasks"]) == 4
+        assert s[0]["names"] == ["leg_length", "torso_length", "target_velocity"]
+
+        ev = c.get(f"/runs/{run}/events").json()
+        kinds = [e["type"] for e in ev]
+        assert (
+            kinds[0] == "run_started" and "sampler_started" in kinds and kinds[-1] == "checkpoint"
+        )
+        after = c.get(f"/runs/{run}/events", params={"since": ev[-2]["id"]}).json()
+        assert [e["type"] for e in after] == ["checkpoint"]
+        assert c.get("/docs").status_code == 200
+        assert "/runs/{run}/curriculum/marginal-value" in c.get("/openapi.json").json()["paths"]
+
+
+@pytest.mark.parametrize(
+    ("path", "code", "words"),
+    [
+        ("/runs/nope/progress", 404, "no run 'nope'"),
+        ("/runs/nope/curriculum", 404, "no run"),
+        ("/runs/nope/events", 404, "no run"),
+        ("/runs/bad%20id!/progress", 422, "pattern"),
+        ("/runs/{run}/history?since=-1", 422, "greater than or equal"),
+        ("/runs/{run}/history?since=abc", 422, "integer"),
+        ("/runs/{run}/curriculum/samples?limit=0", 422, "greater than or equal"),
+        ("/runs/{run}/events?since=x-1", 422, "pattern"),
+        ("/runs/{run}/events?limit=100000", 422, "less than or equal"),
+    ],
+)
+def test_bad_requests_get_4xx_with_a_message(api, run, path, code, words):
+    r = httpx.get(api + path.format(run=run))
+    assert r.status_code == code
+    assert words in str(r.json()["detail"])
+
+
+def test_changing_a_run_needs_the_token(api, api_without_token, run, redis_server):
+    import redis
+
+    with httpx.Client(base_url=api) as c:
+        assert c.post(f"/runs/{run}/pause").status_code == 401
+        wrong = {"Authorization": "Bearer wrong"}
+        assert c.post(f"/runs/{run}/pause", headers=wrong).status_code == 401
+        auth = {"Authorization": f"Bearer {TOKEN}"}
+        assert c.post(f"/runs/{run}/pause", headers=auth).status_code == 202
+        assert c.get(f"/runs/{run}/curriculum").json()["paused"]
+        r = c.put(f"/runs/{run}/curriculum/k", json={"k": 3.5}, headers=auth)
+        assert r.status_code == 202 and r.json()["requested"] == {"k": 3.5}
+        assert c.put(f"/runs/{run}/curriculum/k", json={"k": -1}, headers=auth).status_code == 422
+        assert c.put(f"/runs/{run}/curriculum/k", json={}, headers=auth).status_code == 422
+        assert c.post("/runs/nope/pause", headers=auth).status_code == 404
+        assert c.post(f"/runs/{run}/resume", headers=auth).status_code == 202
+        kinds = [e["type"] for e in c.get(f"/runs/{run}/events").json()]
+        assert kinds[-3:] == ["pause_requested", "k_requested", "resume_requested"]
+    control = redis.Redis.from_url(redis_server.url, decode_responses=True).hgetall(
+        f"paramimic:run:{run}:control"
+    )
+    assert control == {"paused": "0", "k": "3.5"}
+    r = httpx.post(f"{api_without_token}/runs/{run}/pause", headers=auth)
+    assert r.status_code == 403 and "disabled" in r.json()["detail"]
+
+
+def test_a_finished_run_cannot_be_paused(api, redis_server, tmp_path):
+    cfg = ExperimentConfig.model_validate(CFG)
+    reporter = RunReporter(redis_server.url, "finished-run")
+    reporter.start(cfg, tmp_path, 10, None)
+    reporter.set_status("finished", "done")
+    r = httpx.post(f"{api}/runs/finished-run/pause", headers={"Authorization": f"Bearer {TOKEN}"})
+    assert r.status_code == 409 and "finished" in r.json()["detail"]
+
+
+@pytest.mark.parametrize("fixed_run", [True, False], ids=["known-run", "any-run"])
+def test_schemathesis_finds_no_server_error(api, run, tmp_path, fixed_run):
+    """Property-based requests over the whole OpenAPI schema, with the token: no 5xx. With
+    `known-run` every {run} is the seeded run, so the requests reach the endpoints' logic."""
+    config = tmp_path / "schemathesis.toml"
+    config.write_text(f'[parameters]\nrun = "{run}"\n' if fixed_run else "")
+    exe = Path(sys.executable).parent / "schemathesis"
+    res = subprocess.run(
+        [
+            exe,
+            "--config-file",
+            config,
+            "run",
+            f"{api}/openapi.json",
+            "--checks",
+            "not_a_server_error",
+            "--max-examples",
+            "40",
+            "-H",
+            f"Authorization: Bearer {TOKEN}",
+            "--workers",
+            "1",
+            "--seed",
+            "1",
+        ],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
+    if fixed_run:
+        assert "Missing test data" not in res.stdout, res.stdout[-3000:]
+
+
+def test_the_api_imports_neither_torch_nor_mujoco_nor_ray():
+    code = (
+        "import sys, services.api.app, services.cli; "
+        "bad = {'torch', 'mujoco', 'ray'} & set(sys.modules); assert not bad, bad"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr

@@ -1,0 +1,240 @@
+"""`paramimic train` as a user runs it: embedded Redis, local Ray, the sampler, the actors, the
+learner and the API from one command; pause/resume/k over the API; `paramimic status`; and
+nothing left running after it exits, normally or by Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import httpx
+import psutil
+import redis
+import yaml
+
+from services.keys import RunKeys
+from services.launch.redis_server import EmbeddedRedis
+
+TOKEN = "launch-test-token"
+TINY = {
+    "name": "tiny",
+    "character": "hopper",
+    "task": {"leg_length": [0.8, 1.2], "torso_length": [0.9, 1.1], "target_velocity": [1, 1]},
+    "env": {"max_episode_seconds": 1.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+    "curriculum": {"p_mcmc": 1, "n_mcmc": 100},
+    "actors": {"num_actors": 2, "num_envs": 4},
+    "train": {"total_steps": 10**9, "checkpoint_every": 2},
+}
+
+
+class Launch:
+    """`paramimic train` in a subprocess; its output and every descendant process it had."""
+
+    def __init__(self, tmp_path, *args, **train):
+        cfg = tmp_path / "tiny.yaml"
+        cfg.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], **train}}))
+        self.run_dir = tmp_path / "run"
+        env = os.environ | {"PARAMIMIC_API_TOKEN": TOKEN, "COLUMNS": "200", "RAY_ADDRESS": ""}
+        self.proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "train",
+                cfg,
+                "--run-dir",
+                self.run_dir,
+                "--api-port",
+                "0",
+                *args,
+            ],  # fmt: skip
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+        )
+        self.lines: list[str] = []
+        self.descendants: dict[psutil.Process, str] = {}  # process -> name when seen
+        threading.Thread(target=self._read, daemon=True).start()
+        threading.Thread(target=self._watch, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def _watch(self) -> None:
+        me = psutil.Process(self.proc.pid)
+        while self.proc.poll() is None:
+            try:
+                for p in me.children(recursive=True):
+                    if p not in self.descendants:
+                        self.descendants[p] = p.name()
+            except psutil.NoSuchProcess:
+                continue
+            time.sleep(0.1)
+
+    def output(self) -> str:
+        return "".join(self.lines)
+
+    def api_url(self, timeout=180.0) -> str:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            m = re.search(r"API: (http://127\.0\.0\.1:\d+)", self.output())
+            if m:
+                return m.group(1)
+            assert self.proc.poll() is None, self.output()
+            time.sleep(0.1)
+        raise AssertionError(f"no API URL printed:\n{self.output()}")
+
+    def wait(self, timeout=300.0) -> int:
+        code = self.proc.wait(timeout)
+        time.sleep(0.5)
+        return code
+
+    def leftovers(self, timeout=30.0) -> list[str]:
+        """Descendants still alive `timeout` s after the exit (Ray reaps its own)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            alive = [p for p in self.descendants if _alive(p)]
+            if not alive or time.monotonic() > deadline:
+                return [self.descendants[p] for p in alive]
+            time.sleep(0.5)
+
+
+def _alive(p: psutil.Process) -> bool:
+    try:
+        return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def _wait_for(get, predicate, timeout=180.0, what=""):
+    deadline = time.monotonic() + timeout
+    while True:
+        value = get()
+        if predicate(value):
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}: last {value}")
+        time.sleep(0.2)
+
+
+def _stored_run(run_dir):
+    """The run as the embedded Redis persisted it (its AOF), read by a new server."""
+    with EmbeddedRedis(run_dir / "redis") as server:
+        client = redis.Redis.from_url(server.url, decode_responses=True)
+        run_id = (run_dir / "run_id").read_text().strip()
+        keys = RunKeys(run_id)
+        meta, n_history = client.hgetall(keys.meta), client.zcard(keys.history)
+        client.close()
+    return meta, n_history
+
+
+def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
+    launch = Launch(tmp_path)
+    try:
+        url = launch.api_url()
+        c = httpx.Client(base_url=url, timeout=10.0)
+        auth = {"Authorization": f"Bearer {TOKEN}"}
+        [summary] = c.get("/runs").json()
+        run = summary["run_id"]
+        assert summary["status"] == "running" and summary["name"] == "tiny"
+        progress = _wait_for(
+            lambda: c.get(f"/runs/{run}/progress").json(), lambda p: p["iteration"] >= 3,
+            what="3 iterations",
+        )  # fmt: skip
+        assert progress["env_steps"] >= 3 * 256 and progress["steps_per_second"] > 0
+        history = c.get(f"/runs/{run}/history").json()["items"]
+        assert [h["iteration"] for h in history][:3] == [1, 2, 3]
+        cur = c.get(f"/runs/{run}/curriculum").json()
+        assert cur["mode"] == "adaptive" and cur["episodes"] > 0 and cur["refills"] >= 1
+        grid = c.get(f"/runs/{run}/curriculum/marginal-value").json()
+        assert grid["available"] and len(grid["values"]) == 21
+        sources = {b["source"] for b in c.get(f"/runs/{run}/curriculum/samples").json()}
+        assert sources == {"actor0", "actor1"}  # the rollout actors ask the sampler
+        kinds = {e["type"] for e in c.get(f"/runs/{run}/events").json()}
+        assert {"run_started", "sampler_started", "checkpoint"} <= kinds
+
+        # pause: the learner holds before its next iteration
+        assert c.post(f"/runs/{run}/pause", headers=auth).status_code == 202
+        _wait_for(
+            lambda: c.get(f"/runs/{run}/progress").json()["status"], lambda s: s == "paused",
+            what="paused",
+        )  # fmt: skip
+        held = c.get(f"/runs/{run}/progress").json()["iteration"]
+        time.sleep(2.0)
+        assert c.get(f"/runs/{run}/progress").json()["iteration"] == held
+        # k is applied while paused; resume goes on
+        assert c.put(f"/runs/{run}/curriculum/k", json={"k": 0}, headers=auth).status_code == 202
+        _wait_for(
+            lambda: c.get(f"/runs/{run}/curriculum").json(), lambda x: x["mode"] == "uniform",
+            what="k = 0",
+        )  # fmt: skip
+        assert c.post(f"/runs/{run}/resume", headers=auth).status_code == 202
+        _wait_for(
+            lambda: c.get(f"/runs/{run}/progress").json()["iteration"], lambda i: i > held,
+            what="training to go on",
+        )  # fmt: skip
+        kinds = [e["type"] for e in c.get(f"/runs/{run}/events?limit=1000").json()]
+        for kind in ("run_paused", "k_changed", "run_running"):
+            assert kind in kinds
+
+        status = subprocess.run(
+            [sys.executable, "-m", "services.cli", "status", "--api", url],
+            capture_output=True, text=True, timeout=60, env=os.environ | {"COLUMNS": "200"},
+        )  # fmt: skip
+        assert status.returncode == 0, status.stdout + status.stderr
+        assert run in status.stdout and "curriculum.mode" in status.stdout
+        assert "uniform" in status.stdout
+
+        launch.proc.send_signal(signal.SIGINT)
+        assert launch.wait() == 0, launch.output()
+    finally:
+        if launch.proc.poll() is None:
+            launch.proc.kill()
+    assert (launch.run_dir / "checkpoints" / "latest.pt").is_file()
+    names = set(launch.descendants.values())
+    assert {"redis-server", "raylet", "gcs_server"} <= names, names  # what was started
+    assert launch.leftovers() == []
+    try:
+        httpx.get(f"{url}/health", timeout=2.0)
+        raise AssertionError("the API still answers")
+    except httpx.ConnectError:
+        pass
+    meta, n_history = _stored_run(launch.run_dir)
+    assert meta["status"] == "stopped" and n_history >= 4
+
+
+def test_a_run_that_ends_stops_everything_it_started(tmp_path):
+    launch = Launch(tmp_path, total_steps=768)
+    assert launch.wait() == 0, launch.output()
+    assert "API: http://127.0.0.1:" in launch.output()
+    assert "redis-server" in launch.descendants.values()
+    assert launch.leftovers() == []
+    meta, n_history = _stored_run(launch.run_dir)
+    assert meta["status"] == "finished" and n_history == 3
+
+
+def test_a_busy_api_port_fails_before_anything_starts(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        cfg = tmp_path / "tiny.yaml"
+        cfg.write_text(yaml.safe_dump(TINY))
+        res = subprocess.run(
+            [sys.executable, "-m", "services.cli", "train", cfg, "--run-dir", tmp_path / "run",
+             "--api-port", str(port)],  # fmt: skip
+            capture_output=True, text=True, timeout=120, env=os.environ | {"COLUMNS": "200"},
+        )  # fmt: skip
+    assert res.returncode == 2
+    assert f"127.0.0.1:{port} is in use" in res.stdout
+    assert not (tmp_path / "run").exists()
