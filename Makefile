@@ -1,4 +1,5 @@
-# Quick start: `make train` trains the default config (local Ray); `make test` runs the suite.
+# Quick start: `make train` trains the default config (embedded Redis, local Ray, API on
+# 127.0.0.1:8000); `make test` runs the suite.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -29,6 +30,8 @@ bench: $(VENV)/.installed-test
 	$(BIN)/pip install -e ".[test,bench]"
 	$(BIN)/python benchmarks/env_speed.py
 	$(BIN)/python benchmarks/learning.py
+	$(BIN)/python benchmarks/throughput.py
+	$(BIN)/python benchmarks/sampler.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

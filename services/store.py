@@ -14,12 +14,17 @@ from collections.abc import Callable
 
 import redis
 from redis.backoff import ExponentialBackoff
-from redis.exceptions import BusyLoadingError
+from redis.exceptions import AuthenticationError, BusyLoadingError
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
 from redis.retry import Retry
 
 from services.keys import EVENTS_LIMIT, RunKeys
+
+
+class RedisAuthFailed(redis.exceptions.RedisError):
+    """Wrong or missing password: not worth retrying (redis-py files it under ConnectionError)."""
+
 
 RETRYABLE = (RedisConnectionError, RedisTimeoutError, BusyLoadingError, TimeoutError)
 BACKOFF_CAP = 0.5  # seconds between attempts, at most
@@ -37,7 +42,10 @@ def connect(
     """
 
     def connected(conn) -> None:
-        conn.on_connect()
+        try:
+            conn.on_connect()
+        except AuthenticationError as e:
+            raise RedisAuthFailed(f"Redis refused the credentials: {e}") from e
         if on_connect is not None:
             on_connect()
 
@@ -54,18 +62,6 @@ def connect(
         retry_on_error=list(RETRYABLE),
         redis_connect_func=connected,
     )
-
-
-def wait_until_up(client: redis.Redis, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            client.ping()
-            return
-        except RETRYABLE:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
 
 
 def add_event(

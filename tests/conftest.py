@@ -40,3 +40,21 @@ def run_id(request):
     import os
 
     return f"test-{request.node.name[:60].replace('[', '-').replace(']', '')}-{os.urandom(3).hex()}"
+
+
+API_TOKEN = "test-token-123"
+
+
+@pytest.fixture(scope="session")
+def api_url(redis_server, tmp_path_factory):
+    """A real `paramimic api` (uvicorn) on loopback over the session's Redis, with API_TOKEN."""
+    from services.launch.api_process import ApiProcess
+    from services.launch.redis_server import free_port
+
+    api = ApiProcess(
+        redis_server.url, "127.0.0.1", free_port(), API_TOKEN,
+        tmp_path_factory.mktemp("api") / "api.log",
+    )  # fmt: skip
+    api.start()
+    yield api.url
+    api.stop()

@@ -10,6 +10,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from conftest import API_TOKEN as TOKEN
 
 from paramimic.config import ExperimentConfig
 from services.launch.api_process import ApiProcess
@@ -17,7 +18,6 @@ from services.launch.redis_server import free_port
 from services.learner.reporter import RunReporter
 from services.sampler.service import SamplerService
 
-TOKEN = "test-token-123"
 CFG = {
     "name": "api-test",
     "character": "hopper",
@@ -26,25 +26,17 @@ CFG = {
 }
 
 
-def _api(redis_server, tmp_path_factory, token):
-    api = ApiProcess(
-        redis_server.url, "127.0.0.1", free_port(), token,
-        tmp_path_factory.mktemp("api") / "api.log",
-    )  # fmt: skip
-    api.start()
-    return api
-
-
 @pytest.fixture(scope="module")
-def api(redis_server, tmp_path_factory):
-    api = _api(redis_server, tmp_path_factory, TOKEN)
-    yield api.url
-    api.stop()
+def api(api_url):
+    return api_url
 
 
 @pytest.fixture(scope="module")
 def api_without_token(redis_server, tmp_path_factory):
-    api = _api(redis_server, tmp_path_factory, None)
+    api = ApiProcess(
+        redis_server.url, "127.0.0.1", free_port(), None, tmp_path_factory.mktemp("api") / "log"
+    )
+    api.start()
     yield api.url
     api.stop()
 

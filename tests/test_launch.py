@@ -14,6 +14,7 @@ import time
 
 import httpx
 import psutil
+import pytest
 import redis
 import yaml
 
@@ -211,7 +212,7 @@ def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
     assert meta["status"] == "stopped" and n_history >= 4
 
 
-def test_a_run_that_ends_stops_everything_it_started(tmp_path):
+def test_a_run_that_ends_stops_everything_it_started_and_resumes(tmp_path):
     launch = Launch(tmp_path, total_steps=768)
     assert launch.wait() == 0, launch.output()
     assert "API: http://127.0.0.1:" in launch.output()
@@ -219,6 +220,15 @@ def test_a_run_that_ends_stops_everything_it_started(tmp_path):
     assert launch.leftovers() == []
     meta, n_history = _stored_run(launch.run_dir)
     assert meta["status"] == "finished" and n_history == 3
+    run_id = (launch.run_dir / "run_id").read_text()
+    # --resume: the same run id, its Redis state reloaded from the AOF, one more iteration
+    again = Launch(tmp_path, "--resume", "--total-steps", "1024", total_steps=768)
+    assert again.wait() == 0, again.output()
+    assert "resumed at iteration 3" in again.output()
+    assert (launch.run_dir / "run_id").read_text() == run_id
+    assert again.leftovers() == []
+    meta, n_history = _stored_run(launch.run_dir)
+    assert meta["status"] == "finished" and n_history == 4
 
 
 def test_a_busy_api_port_fails_before_anything_starts(tmp_path):
@@ -238,3 +248,27 @@ def test_a_busy_api_port_fails_before_anything_starts(tmp_path):
     assert res.returncode == 2
     assert f"127.0.0.1:{port} is in use" in res.stdout
     assert not (tmp_path / "run").exists()
+
+
+def test_an_external_redis_with_a_password_is_used_and_left_running(tmp_path):
+    with EmbeddedRedis(tmp_path / "external", password="pa55word") as server:
+        launch = Launch(tmp_path, "--redis-url", server.url, "--no-api", total_steps=512)
+        assert launch.wait() == 0, launch.output()
+        assert "Redis: embedded" not in launch.output()
+        assert not (launch.run_dir / "redis").exists()  # no server of its own
+        client = redis.Redis.from_url(server.url, decode_responses=True)
+        run_id = (launch.run_dir / "run_id").read_text().strip()
+        assert client.hget(RunKeys(run_id).meta, "status") == "finished"  # still up, has the run
+        assert client.zcard(RunKeys(run_id).history) == 2
+        with pytest.raises(redis.AuthenticationError):
+            redis.Redis(port=server.port).get("x")  # the password is required
+        assert launch.leftovers() == []
+        # a wrong password fails at once, before anything starts, without echoing it
+        wrong = server.url.replace("pa55word", "wrong")
+        res = subprocess.run(
+            [sys.executable, "-m", "services.cli", "train", tmp_path / "tiny.yaml",
+             "--run-dir", tmp_path / "other", "--redis-url", wrong],  # fmt: skip
+            capture_output=True, text=True, timeout=60, env=os.environ | {"COLUMNS": "200"},
+        )  # fmt: skip
+        assert res.returncode == 2 and "cannot use Redis at redis://:***@" in res.stdout
+        assert "wrong" not in res.stdout and not (tmp_path / "other").exists()

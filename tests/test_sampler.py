@@ -9,6 +9,7 @@ import signal
 import threading
 import time
 
+import httpx
 import numpy as np
 import pytest
 import ray
@@ -18,6 +19,7 @@ from paramimic.config import ExperimentConfig
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
+from services.learner.reporter import RunReporter
 from services.sampler.service import SamplerService
 
 CFG = {
@@ -137,8 +139,11 @@ def _events(url: str, run_id: str) -> list[str]:
     return [f["type"] for _, f in r.xrange(RunKeys(run_id).events)]
 
 
-def test_kill_9_of_the_sampler_actor_loses_nothing(local_ray, redis_server, run_id, tmp_path):
+def test_kill_9_of_the_sampler_actor_loses_nothing(
+    local_ray, redis_server, api_url, run_id, tmp_path
+):
     cfg = _cfg(steps_per_fragment=100)
+    RunReporter(redis_server.url, run_id).start(cfg, tmp_path, 0, None)  # the API lists the run
     gate = Gate()
     with ray_stack(cfg, tmp_path, redis_server.url, run_id) as stack:
         total = 8 * 2 * 4 * 100
@@ -154,7 +159,9 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(local_ray, redis_server, run_
         os.kill(pid, signal.SIGKILL)
         assert ray.get(stack.sampler.pid.remote(), timeout=120) != pid  # restarted by Ray
         assert ray.get(stack.sampler.digest.remote()) == before
-        assert "sampler_restarted" in _events(redis_server.url, run_id)
+        events = httpx.get(f"{api_url}/runs/{run_id}/events").json()
+        restart = next(e for e in events if e["type"] == "sampler_restarted")
+        assert restart["data"]["digest"] == before  # what it reloaded is what it had
         # 2) mid-fragment: actors are calling it; Ray retries their calls on the new sampler
         gate.open_.set()
         _wait_for(lambda: len(metrics) >= n + 2, what="training to go on")

@@ -35,6 +35,8 @@ RedisDep = Annotated[Redis, Depends(get_redis)]
 RunId = Annotated[str, Path(pattern=RUN_ID.pattern, description="run id, as listed by /runs")]
 STREAM_ID = r"^(0|[0-9]{1,19}-[0-9]{1,19})$"  # fits Redis' 64-bit stream id parts
 
+META_FIELDS = ("name", "character", "status", "started_at", "updated_at", "total_steps")
+
 router = APIRouter()
 bearer = HTTPBearer(auto_error=False)
 
@@ -62,12 +64,17 @@ async def require_token(
 TokenDep = Depends(require_token)
 
 
-async def run_meta(r: Redis, run: str) -> tuple[RunKeys, dict]:
+def _not_found(run: str) -> HTTPException:
+    return HTTPException(status.HTTP_404_NOT_FOUND, f"no run {run!r}; GET /runs lists them")
+
+
+async def run_status(r: Redis, run: str) -> tuple[RunKeys, str]:
+    """The run's keys and status; 404 if there is no such run."""
     keys = RunKeys(run)
-    meta = await r.hgetall(keys.meta)
-    if not meta:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no run {run!r}; GET /runs lists them")
-    return keys, meta
+    state = await r.hget(keys.meta, "status")
+    if state is None:
+        raise _not_found(run)
+    return keys, state
 
 
 def _num(value: str | None, kind=float):
@@ -90,12 +97,13 @@ async def list_runs(r: RedisDep):
     pipe = r.pipeline(transaction=False)
     for run in ids:
         keys = RunKeys(run)
-        pipe.hgetall(keys.meta)
+        pipe.hmget(keys.meta, list(META_FIELDS))
         pipe.hmget(keys.progress, ["iteration", "env_steps"])
     replies = await pipe.execute()
     runs = []
-    for run, meta, (iteration, env_steps) in zip(ids, replies[::2], replies[1::2], strict=True):
-        if not meta:
+    for run, values, (iteration, env_steps) in zip(ids, replies[::2], replies[1::2], strict=True):
+        meta = {k: v for k, v in zip(META_FIELDS, values, strict=True) if v is not None}
+        if "status" not in meta:
             continue
         runs.append(
             RunSummary(
@@ -115,14 +123,19 @@ async def list_runs(r: RedisDep):
 
 @router.get("/runs/{run}/progress", response_model=Progress, tags=["runs"])
 async def progress(run: RunId, r: RedisDep):
-    keys, meta = await run_meta(r, run)
-    p = await r.hgetall(keys.progress)
+    keys = RunKeys(run)
+    pipe = r.pipeline(transaction=False)  # one round trip
+    pipe.hmget(keys.meta, ["status", "total_steps"])
+    pipe.hgetall(keys.progress)
+    (state, total_steps), p = await pipe.execute()
+    if state is None:
+        raise _not_found(run)
     return Progress(
         run_id=run,
-        status=meta.get("status", "unknown"),
+        status=state,
         iteration=_num(p.get("iteration"), int) or 0,
         env_steps=_num(p.get("env_steps"), int) or 0,
-        total_steps=_num(meta.get("total_steps"), int),
+        total_steps=_num(total_steps, int),
         episodes=_num(p.get("episodes_total"), int) or 0,
         steps_per_second=_num(p.get("steps_per_second")),
         mean_return=_num(p.get("mean_return")),
@@ -138,7 +151,7 @@ async def history(
     since: Annotated[int, Query(ge=0, le=2**53, description="records after this iteration")] = 0,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 1000,
 ):
-    keys, _ = await run_meta(r, run)
+    keys, _ = await run_status(r, run)
     raw = await r.zrangebyscore(keys.history, f"({since}", "+inf", start=0, num=limit)
     items = [json.loads(x) for x in raw]
     return HistoryPage(
@@ -148,7 +161,7 @@ async def history(
 
 @router.get("/runs/{run}/curriculum", response_model=Curriculum, tags=["curriculum"])
 async def curriculum(run: RunId, r: RedisDep):
-    keys, _ = await run_meta(r, run)
+    keys, _ = await run_status(r, run)
     summary, updated = await r.hmget(keys.curriculum, ["summary", "updated_at"])
     if summary is None:
         raise HTTPException(
@@ -165,7 +178,7 @@ async def curriculum(run: RunId, r: RedisDep):
 )
 async def marginal_value(run: RunId, r: RedisDep):
     """V̄ over the two task dimensions the config displays (the others at the box centre)."""
-    keys, _ = await run_meta(r, run)
+    keys, _ = await run_status(r, run)
     grid = await r.hget(keys.curriculum, "grid")
     data = json.loads(grid) if grid else None
     if not data:
@@ -178,7 +191,7 @@ async def samples(
     run: RunId, r: RedisDep, limit: Annotated[int, Query(ge=1, le=SAMPLES_LIMIT)] = 20
 ):
     """The latest task batches the sampler handed out, newest first."""
-    keys, _ = await run_meta(r, run)
+    keys, _ = await run_status(r, run)
     return [json.loads(x) for x in await r.lrange(keys.samples, 0, limit - 1)]
 
 
@@ -192,7 +205,7 @@ async def events(
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
 ):
     """Restarts, checkpoints, pauses, k changes, ... oldest first."""
-    keys, _ = await run_meta(r, run)
+    keys, _ = await run_status(r, run)
     start = "-" if since == "0" else f"({since}"
     entries = await r.xrange(keys.events, min=start, max="+", count=limit)
     return [
@@ -208,9 +221,9 @@ async def events(
 
 
 async def _request(r: Redis, run: str, field: str, value, kind: str, message: str) -> Accepted:
-    keys, meta = await run_meta(r, run)
-    if meta.get("status") not in ("running", "paused"):
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run!r} is {meta.get('status')}")
+    keys, state = await run_status(r, run)
+    if state not in ("running", "paused"):
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run!r} is {state}")
     pipe = r.pipeline(transaction=True)
     pipe.hset(keys.control, field, value)
     add_event(pipe, keys, kind, message)

@@ -34,9 +34,9 @@ def free_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
-def _serving(process: subprocess.Popen, port: int, timeout: float) -> bool:
+def _serving(process: subprocess.Popen, port: int, password: str | None, timeout: float) -> bool:
     """Wait until the server answers PING; False if it exits or the timeout passes."""
-    client = redis.Redis(host="127.0.0.1", port=port, socket_connect_timeout=1)
+    client = redis.Redis(host="127.0.0.1", port=port, password=password, socket_connect_timeout=1)
     deadline = time.monotonic() + timeout
     try:
         while process.poll() is None and time.monotonic() < deadline:
@@ -53,14 +53,18 @@ def _serving(process: subprocess.Popen, port: int, timeout: float) -> bool:
 class EmbeddedRedis:
     """Start with `start()`, stop with `stop()` (or use as a context manager)."""
 
-    def __init__(self, data_dir: Path, port: int | None = None) -> None:
+    def __init__(
+        self, data_dir: Path, port: int | None = None, password: str | None = None
+    ) -> None:
         self.data_dir = Path(data_dir)
         self.port = port
+        self.password = password
         self.process: subprocess.Popen | None = None
 
     @property
     def url(self) -> str:
-        return f"redis://127.0.0.1:{self.port}/0"
+        auth = f":{self.password}@" if self.password else ""
+        return f"redis://{auth}127.0.0.1:{self.port}/0"
 
     def start(self, timeout: float = 30.0) -> str:
         """Start the server (on a free port unless one was given); returns its URL."""
@@ -68,31 +72,14 @@ class EmbeddedRedis:
         fixed = self.port is not None
         for _ in range(1 if fixed else 3):  # a probed free port can be taken before Redis binds
             port = self.port if fixed else free_port()
+            conf = self._write_config(port)
             process = subprocess.Popen(
-                [
-                    redis_server_binary(),
-                    "--bind",
-                    "127.0.0.1",
-                    "--port",
-                    str(port),
-                    "--dir",
-                    str(self.data_dir.resolve()),
-                    "--appendonly",
-                    "yes",
-                    "--appendfsync",
-                    "everysec",
-                    "--save",
-                    "",
-                    "--daemonize",
-                    "no",
-                    "--logfile",
-                    "redis.log",
-                ],  # fmt: skip
+                [redis_server_binary(), str(conf)],
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
                 start_new_session=True,  # Ctrl-C in the terminal reaches the launcher only
             )
-            if _serving(process, port, timeout):
+            if _serving(process, port, self.password, timeout):
                 self.process, self.port = process, port
                 return self.url
             process.kill()
@@ -100,6 +87,26 @@ class EmbeddedRedis:
         log = self.data_dir / "redis.log"
         tail = log.read_text()[-2000:] if log.exists() else ""
         raise RuntimeError(f"redis-server did not start on 127.0.0.1:{port}:\n{tail}")
+
+    def _write_config(self, port: int) -> Path:
+        """redis.conf in the data dir (mode 0600: it may hold the password, kept off `ps`)."""
+        lines = [
+            "bind 127.0.0.1",
+            f"port {port}",
+            f'dir "{self.data_dir.resolve()}"',
+            "appendonly yes",
+            "appendfsync everysec",
+            'save ""',
+            "daemonize no",
+            "logfile redis.log",
+        ]
+        if self.password:
+            lines.append(f'requirepass "{self.password}"')
+        conf = self.data_dir / "redis.conf"
+        conf.touch(mode=0o600)
+        conf.chmod(0o600)
+        conf.write_text("\n".join(lines) + "\n")
+        return conf
 
     def stop(self, timeout: float = 10.0) -> None:
         """SIGTERM: Redis fsyncs the AOF and exits; SIGKILL if it does not within `timeout`."""

@@ -9,6 +9,7 @@ rollout worker in this process with an in-process curriculum (no Ray, Redis or A
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 from contextlib import ExitStack
@@ -65,6 +66,19 @@ class StopFlag:
         self.set = True
 
 
+def check_redis(url: str) -> None:
+    """Fail before anything starts if `url` is malformed, unreachable or refuses the password."""
+    import redis
+
+    try:
+        client = redis.Redis.from_url(url, socket_connect_timeout=3, socket_timeout=3)
+        client.ping()
+        client.close()
+    except (ValueError, redis.exceptions.RedisError) as e:
+        shown = re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)  # no password in messages
+        raise LaunchError(f"cannot use Redis at {shown}: {e}") from e
+
+
 def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -> int:
     """Train; returns the process exit code (0 done or stopped, 3 all rollout actors lost)."""
     run_dir = cfg.resolved_run_dir()
@@ -87,6 +101,8 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
             raise LaunchError(
                 f"{opts.api_host}:{api_port} is in use; pass --api-port (0 = any free) or --no-api"
             )
+    if not opts.serial and opts.redis_url is not None:
+        check_redis(opts.redis_url)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.yaml").write_text(
         yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
