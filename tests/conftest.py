@@ -49,7 +49,7 @@ API_TOKEN = "test-token-123"
 def api_url(redis_server, tmp_path_factory):
     """A real `paramimic api` (uvicorn) on loopback over the session's Redis, with API_TOKEN."""
     from services.launch.api_process import ApiProcess
-    from services.launch.redis_server import free_port
+    from services.launch.processes import free_port
 
     api = ApiProcess(
         redis_server.url, "127.0.0.1", free_port(), API_TOKEN,

@@ -14,7 +14,7 @@ from conftest import API_TOKEN as TOKEN
 
 from paramimic.config import ExperimentConfig
 from services.launch.api_process import ApiProcess
-from services.launch.redis_server import free_port
+from services.launch.processes import free_port
 from services.learner.reporter import RunReporter
 from services.sampler.service import SamplerService
 

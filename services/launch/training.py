@@ -54,15 +54,17 @@ def run_id_for(run_dir: Path, cfg: ExperimentConfig, resume: bool) -> str:
 
 
 class StopFlag:
-    """Set by the first Ctrl-C or SIGTERM: finish the iteration, checkpoint, stop."""
+    """Set by the first Ctrl-C or SIGTERM: finish the iteration, checkpoint, stop. A second one
+    interrupts at once (what was started is still stopped on the way out)."""
 
     def __init__(self, console: Console) -> None:
         self.set = False
         self.console = console
 
     def __call__(self, signum, frame) -> None:
-        if not self.set:
-            self.console.print("[yellow]stopping after this iteration...[/]")
+        if self.set:
+            raise KeyboardInterrupt
+        self.console.print("[yellow]stopping after this iteration (again to interrupt)...[/]")
         self.set = True
 
 
@@ -92,8 +94,7 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
             raise LaunchError(str(e)) from e
     api_port = opts.api_port
     if not opts.serial and opts.api:
-        from services.launch.api_process import port_is_free
-        from services.launch.redis_server import free_port
+        from services.launch.processes import free_port, port_is_free
 
         if api_port == 0:
             api_port = free_port(opts.api_host)
@@ -210,6 +211,8 @@ def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, servi
         console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
         code = 3
     finally:
+        if code == 1 and stop.set:  # interrupted by a second Ctrl-C
+            status = "stopped"
         try:
             reporter.set_status(status, f"training {status} at iteration "
                                         f"{trainer.progress.iteration}")  # fmt: skip
