@@ -85,7 +85,10 @@ class SamplerService:
                 add_event(pipe, self.keys, event[0], event[1], {"digest": self.digest()})
             pipe.execute()
             if not self.rewrite_all or attempt:
-                return  # else: the connection was re-established during execute; write it all
+                return
+            # the connection was re-established during execute: write the whole state once more
+            # (`ops` and the event were applied already)
+            ops, event = None, None
 
     # --- the curriculum's calls ---------------------------------------------------------------
 
