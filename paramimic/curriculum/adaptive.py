@@ -37,6 +37,8 @@ class AdaptiveCurriculum:
         self.mu: float | None = None
         self.marginal_iteration = -1
         self.stats: dict[str, float] = dict.fromkeys(STAT_FIELDS, 0)
+        self._stats_of: np.ndarray | None = None  # the buffer whose mean/std are cached
+        self._stats: tuple[dict, dict] = ({}, {})
 
     @classmethod
     def from_config(cls, cfg: ExperimentConfig) -> AdaptiveCurriculum:
@@ -109,7 +111,8 @@ class AdaptiveCurriculum:
 
     def summary(self) -> dict:
         """The public state: what the API shows under /curriculum."""
-        s, buf = self.stats, self.sampler.buffer
+        s = self.stats
+        mean, std = self._buffer_stats()
         episodes = max(s["episodes"], 1)
         return {
             "mode": self.mode,
@@ -118,9 +121,9 @@ class AdaptiveCurriculum:
             "marginal_iteration": self.marginal_iteration,
             "refills": self.sampler.refills,
             "buffer_adaptive": self.sampler.adaptive,
-            "buffer_size": len(buf),
-            "buffer_mean": self.space.to_dict(buf.mean(axis=0)),
-            "buffer_std": self.space.to_dict(buf.std(axis=0)),
+            "buffer_size": len(self.sampler.buffer),
+            "buffer_mean": mean,
+            "buffer_std": std,
             "task_names": list(self.space.names),
             "episodes": int(s["episodes"]),
             "mean_return": s["return_sum"] / episodes if s["episodes"] else None,
@@ -133,23 +136,31 @@ class AdaptiveCurriculum:
             "exploration_rate_visited": None,
         }
 
+    def _buffer_stats(self) -> tuple[dict, dict]:
+        """Per-dimension mean and std of S, recomputed only when S is replaced."""
+        buf = self.sampler.buffer
+        if getattr(self, "_stats_of", None) is not buf:
+            self._stats_of = buf
+            self._stats = (
+                self.space.to_dict(buf.mean(axis=0)),
+                self.space.to_dict(buf.std(axis=0)),
+            )
+        return self._stats
+
     # --- state ----------------------------------------------------------------------------------
 
     def to_state(self, parts: Iterable[str] = STATE_PARTS) -> dict:
         """JSON-able state in three parts: `core` changes on every call, `buffer` on refills,
         `marginal` when the learner sends V̄; `parts` picks some of them."""
         state: dict = {}
-        if "core" in parts or "buffer" in parts:
-            core = self.sampler.to_state()
-            buffer = core.pop("buffer")
-            if "buffer" in parts:
-                state["buffer"] = buffer
-            if "core" in parts:
-                state["core"] = core | {
-                    "mu": self.mu,
-                    "marginal_iteration": self.marginal_iteration,
-                    "stats": dict(self.stats),
-                }
+        if "buffer" in parts:
+            state["buffer"] = self.sampler.buffer.tolist()
+        if "core" in parts:
+            state["core"] = self.sampler.to_state(with_buffer=False) | {
+                "mu": self.mu,
+                "marginal_iteration": self.marginal_iteration,
+                "stats": dict(self.stats),
+            }
         if "marginal" in parts:
             state["marginal"] = (
                 None if self.layers is None else [[w.tolist(), b.tolist()] for w, b in self.layers]

@@ -90,14 +90,16 @@ class AdaptiveSampler:
         """Alg. 1 l.7: n task parameters chosen from S: [n, d]."""
         return self.buffer[self.rng.integers(0, len(self.buffer), size=n)].copy()
 
-    def to_state(self) -> dict:
-        return {
+    def to_state(self, with_buffer: bool = True) -> dict:
+        state = {
             "k": self.k,
-            "buffer": self.buffer.tolist(),
             "refills": self.refills,
             "adaptive": self.adaptive,
             "rng": self.rng.bit_generator.state,
         }
+        if with_buffer:
+            state["buffer"] = self.buffer.tolist()
+        return state
 
     def from_state(self, state: dict) -> None:
         self.k = float(state["k"])
