@@ -216,6 +216,7 @@ def test_schemathesis_finds_no_server_error(api, run, tmp_path, fixed_run):
         capture_output=True,
         text=True,
         timeout=600,
+        cwd=tmp_path,  # its cache goes there, not into the checkout
     )
     assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
     if fixed_run:
