@@ -141,7 +141,11 @@ class TrainConfig(Section):
 
 
 class ExperimentConfig(Section):
-    name: str = "experiment"
+    name: str = Field(
+        "experiment",
+        pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$",
+        description="experiment name: letters, digits, '_', '.', '-' (it starts the run id)",
+    )
     character: str = "walker"
     task: dict[str, tuple[float, float]] = Field(
         default_factory=dict, description="the task space A: name -> [min, max]"

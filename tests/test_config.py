@@ -28,6 +28,7 @@ def _write(tmp_path, text):
         ("ppo: {num_stepz: 100}", "ppo.num_stepz", "Extra inputs are not permitted"),
         ("task: {arm_length: [0.8, 1.2]}", "task.arm_length", "not a parameter of 'walker'"),
         ("curriculum: {k: -1}", "curriculum.k", "greater than or equal to 0"),
+        ("name: my run", "name", "should match pattern"),  # it starts the Redis run id
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):
