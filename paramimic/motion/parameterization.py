@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-
 TAU_LIMIT = 3.0  # |τ| bound: a step advances the reference by 0.05x to 20x the sim step
 
 
