@@ -1,0 +1,91 @@
+"""Visited regions of the task space and the phase switch of [L21] §6.
+
+density(a) ∝ Σ_{a_k ∈ neighbour(a)} exp(−(a_k − a)ᵀA(a_k − a)) (Eq. 15) over the elite
+parameters, here with A = I/h² on the box normalized to [0, 1] per free dimension, so that one
+elite exactly at a gives density 1. The paper leaves the scale of A to the user; h (the kernel
+bandwidth) is our default. Regions: visited A_h (density ≥ D = 0.8), surrounding A_s
+(D' = 0.2 ≤ density < D) and unvisited; the explored ratio ER is the share of A in A_h.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from paramimic.curriculum.task_space import TaskSpace
+
+VISITED, SURROUNDING, UNVISITED = "visited", "surrounding", "unvisited"
+
+
+class Density:
+    """KDE over a fixed set of points (rebuild it when the elite set changes)."""
+
+    def __init__(self, space: TaskSpace, points: np.ndarray, bandwidth: float = 0.1) -> None:
+        self.space, self.h = space, bandwidth
+        self.free = space.width > 0
+        self.tree = cKDTree(self._normalized(np.asarray(points).reshape(-1, space.dim)))
+
+    def _normalized(self, a: np.ndarray) -> np.ndarray:
+        a = np.atleast_2d(np.asarray(a, np.float64))
+        return ((a - self.space.low) / np.where(self.free, self.space.width, 1.0))[:, self.free]
+
+    def __call__(self, a: np.ndarray) -> np.ndarray:
+        """density at each row of a: [n]. Neighbours beyond 3h add < e⁻⁹ each and are skipped."""
+        x = self._normalized(a)
+        out = np.zeros(len(x))
+        if self.tree.n == 0:
+            return out
+        for i, idx in enumerate(self.tree.query_ball_point(x, 3.0 * self.h)):
+            if idx:
+                d2 = ((self.tree.data[idx] - x[i]) ** 2).sum(axis=1)
+                out[i] = np.exp(-d2 / self.h**2).sum()  # Eq. 15
+        return out
+
+
+def regions(density: np.ndarray, visited: float = 0.8, surrounding: float = 0.2) -> np.ndarray:
+    """A_h where density ≥ D, A_s where D' ≤ density < D, else unvisited ([L21] §6.2)."""
+    return np.where(
+        density >= visited, VISITED, np.where(density >= surrounding, SURROUNDING, UNVISITED)
+    )
+
+
+def explored_ratio(density: Density, probe: np.ndarray, visited: float = 0.8) -> float:
+    """ER: the share of the task space in A_h, estimated on fixed probe points."""
+    return float(np.mean(density(probe) >= visited))
+
+
+@dataclass
+class PhaseSwitch:
+    """[L21] §6.3: exploration until the exploration rate in A_s falls below the one in A_h,
+    refinement until it rises above it again. Rates are smoothed over the occasional samples
+    taken in each region (exponential moving average with `smoothing`)."""
+
+    phase: str = "exploration"
+    rate_surrounding: float | None = None
+    rate_visited: float | None = None
+    smoothing: float = 0.5
+    switches: int = 0
+
+    def observe(self, region: str, rate: float) -> str:
+        """Record the exploration rate of a batch drawn in `region`; returns the phase."""
+        if region == SURROUNDING:
+            self.rate_surrounding = _ema(self.rate_surrounding, rate, self.smoothing)
+        elif region == VISITED:
+            self.rate_visited = _ema(self.rate_visited, rate, self.smoothing)
+        else:
+            raise ValueError(
+                f"rates are measured in {VISITED!r} or {SURROUNDING!r}, not {region!r}"
+            )
+        s, h = self.rate_surrounding, self.rate_visited
+        if s is not None and h is not None:
+            if self.phase == "exploration" and s < h:
+                self.phase, self.switches = "refinement", self.switches + 1
+            elif self.phase == "refinement" and s > h:
+                self.phase, self.switches = "exploration", self.switches + 1
+        return self.phase
+
+
+def _ema(old: float | None, new: float, smoothing: float) -> float:
+    return new if old is None else smoothing * old + (1.0 - smoothing) * new

@@ -1,0 +1,56 @@
+"""KDE density (Eq. 15), region labels and the phase switch of [L21] §6 on known inputs."""
+
+import numpy as np
+import pytest
+
+from paramimic.curriculum.density import (
+    SURROUNDING,
+    UNVISITED,
+    VISITED,
+    Density,
+    PhaseSwitch,
+    explored_ratio,
+    regions,
+)
+from paramimic.curriculum.task_space import TaskSpace
+
+# gravity 0..2 and height 0..1, target velocity fixed: normalized x = g/2, y = h
+SPACE = TaskSpace.from_ranges({"g": (0.0, 2.0), "h": (0.0, 1.0), "v": (1.0, 1.0)})
+
+
+def test_density_by_hand():
+    kde = Density(SPACE, np.array([[1.0, 0.5, 1.0], [1.2, 0.5, 1.0]]), bandwidth=0.1)
+    # at the first point: e⁰ + exp(−(0.1/0.1)²) = 1 + e⁻¹ (the second is 0.1 away, normalized)
+    assert kde([[1.0, 0.5, 1.0]])[0] == pytest.approx(1 + np.exp(-1))
+    # halfway: two points 0.05 away: 2 exp(−0.25)
+    assert kde([[1.1, 0.5, 1.0]])[0] == pytest.approx(2 * np.exp(-0.25))
+    assert kde([[0.0, 0.0, 1.0]])[0] == 0.0  # nothing within 3h
+    assert Density(SPACE, np.empty((0, 3)))([[1.0, 0.5, 1.0]])[0] == 0.0
+
+
+def test_regions_and_explored_ratio():
+    assert regions(np.array([1.5, 0.8, 0.5, 0.2, 0.1])).tolist() == [
+        VISITED, VISITED, SURROUNDING, SURROUNDING, UNVISITED,
+    ]  # fmt: skip
+    # elites on a dense grid over the left half of the box: about half of A is visited
+    g, h = np.meshgrid(np.linspace(0, 1.0, 21), np.linspace(0, 1, 21))
+    pts = np.stack([g.ravel(), h.ravel(), np.ones(g.size)], axis=1)
+    kde = Density(SPACE, pts, bandwidth=0.05)
+    probe = SPACE.sample(np.random.default_rng(0), 4000)
+    assert explored_ratio(kde, probe) == pytest.approx(0.5, abs=0.05)
+
+
+def test_phase_switch_on_scripted_rates():
+    p = PhaseSwitch(smoothing=0.0)  # no smoothing: each sample decides
+    assert p.observe(SURROUNDING, 5.0) == "exploration"  # no rate in A_h yet
+    assert p.observe(VISITED, 2.0) == "exploration"  # 5 > 2: keep exploring
+    assert p.observe(SURROUNDING, 1.0) == "refinement"  # 1 < 2: refine
+    assert p.observe(VISITED, 0.5) == "exploration"  # A_s (1) above A_h (0.5) again
+    assert p.switches == 2
+    with pytest.raises(ValueError, match="not.*unvisited|unvisited"):
+        p.observe(UNVISITED, 1.0)
+    q = PhaseSwitch(smoothing=0.5)
+    q.observe(VISITED, 2.0)
+    q.observe(SURROUNDING, 4.0)
+    assert q.observe(SURROUNDING, 0.0) == "exploration"  # EMA 2.0 is not below 2.0
+    assert q.observe(SURROUNDING, 0.0) == "refinement"  # EMA 1.0 < 2.0
