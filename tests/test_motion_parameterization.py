@@ -56,3 +56,28 @@ def test_knn_proxy_interpolates_elite_traces():
     assert out.shape == (4, 2) and out == pytest.approx(np.full((4, 2), 0.5))  # symmetric
     near_zero = knn_proxy(e, traces.__getitem__, [0.1], k=2)[0, 0]
     assert 0.0 < near_zero < 0.25  # pulled to the nearest elite
+
+
+def test_parameterization_net_fits_a_smooth_mapping():
+    import torch
+
+    from paramimic.curriculum.parameterization_net import ParameterizationNet
+    from paramimic.curriculum.task_space import TaskSpace
+
+    torch.set_num_threads(1)
+    space = TaskSpace.from_ranges({"g": (0.5, 1.5), "h": (0.0, 1.0)})
+    t = np.linspace(0, 1, 10)
+
+    def truth(a):  # trace [10, 2]: a displacement and a τ that vary smoothly with a
+        return np.stack([np.sin(np.pi * a[0] * t) * a[1], 0.3 * (a[0] - 1.0) * np.ones(10)], 1)
+
+    rng = np.random.default_rng(0)
+    params = space.sample(rng, 256)
+    traces = np.stack([truth(a) for a in params])
+    net = ParameterizationNet(space, (10, 2), hidden=(64, 64), lr=3e-3, seed=0)
+    first = net.fit(params, traces, 1)
+    last = net.fit(params, traces, 1500)
+    assert net.version == 2 and last < 0.05 * first
+    test = space.sample(rng, 32)
+    err = net.predict(test) - np.stack([truth(a) for a in test])
+    assert np.sqrt(np.mean(err**2)) < 0.05  # the traces' values are O(1)

@@ -1,0 +1,52 @@
+"""The parameterization MLP P_θ of [L21] §5.2: a ↦ {(d_t, τ_t) | t = 0..T} (Eq. 11), a
+regression on the elite episodes' traces minimizing Σ_t ‖d_t − d*_t‖² + (τ_t − τ*_t)² (Eq. 12)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from paramimic.curriculum.marginal_value import scale_tasks
+from paramimic.curriculum.task_space import TaskSpace
+from paramimic.rl.networks import mlp
+
+
+class ParameterizationNet:
+    def __init__(
+        self,
+        space: TaskSpace,
+        trace_shape: tuple[int, int],  # (T + 1, D + 1): per step, displacement d_t and τ_t
+        hidden: tuple[int, ...] = (256, 256),
+        lr: float = 1e-3,
+        batch_size: int = 64,
+        seed: int = 0,
+    ) -> None:
+        self.space, self.trace_shape, self.batch_size = space, tuple(trace_shape), batch_size
+        with torch.random.fork_rng():
+            torch.manual_seed(seed)
+            self.net = mlp([space.dim, *hidden, int(np.prod(trace_shape))])
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
+        self.rng = np.random.default_rng(seed)
+        self.version = 0  # bumped by every fit, so that actors know which P_θ they hold
+        self.loss: float | None = None
+
+    def predict(self, a: np.ndarray) -> np.ndarray:
+        """P_θ(a) for a batch [n, d] -> traces [n, T + 1, D + 1]."""
+        x = torch.as_tensor(scale_tasks(self.space, np.atleast_2d(a)), dtype=torch.float32)
+        with torch.no_grad():
+            return self.net(x).numpy().reshape(-1, *self.trace_shape).astype(np.float64)
+
+    def fit(self, params: np.ndarray, traces: np.ndarray, steps: int) -> float:
+        """`steps` minibatch updates of Eq. 12 on elite (a, trace) pairs; returns the mean loss
+        per trace of the last one."""
+        x_all = torch.as_tensor(scale_tasks(self.space, params), dtype=torch.float32)
+        y_all = torch.as_tensor(np.asarray(traces).reshape(len(params), -1), dtype=torch.float32)
+        for _ in range(steps):
+            idx = self.rng.integers(0, len(params), size=min(self.batch_size, len(params)))
+            loss = (self.net(x_all[idx]) - y_all[idx]).pow(2).sum(dim=1).mean()  # Eq. 12
+            self.opt.zero_grad()
+            loss.backward()
+            self.opt.step()
+            self.loss = loss.item()
+        self.version += 1
+        return float(self.loss)
