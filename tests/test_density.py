@@ -54,3 +54,15 @@ def test_phase_switch_on_scripted_rates():
     q.observe(SURROUNDING, 4.0)
     assert q.observe(SURROUNDING, 0.0) == "exploration"  # EMA 2.0 is not below 2.0
     assert q.observe(SURROUNDING, 0.0) == "refinement"  # EMA 1.0 < 2.0
+
+
+def test_sample_band_draws_only_from_the_band():
+    from paramimic.curriculum.density import sample_band
+
+    kde = Density(SPACE, np.array([[1.0, 0.5, 1.0]]), bandwidth=0.1)
+    rng = np.random.default_rng(0)
+    ring = sample_band(SPACE, kde, rng, 20, 0.2, 0.8)  # A_s: a ring around the one elite
+    assert len(ring) == 20
+    rho = kde(ring)
+    assert np.all((rho >= 0.2) & (rho < 0.8))
+    assert len(sample_band(SPACE, kde, rng, 5, 2.0)) == 0  # nowhere that dense

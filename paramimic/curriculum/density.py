@@ -56,6 +56,29 @@ def explored_ratio(density: Density, probe: np.ndarray, visited: float = 0.8) ->
     return float(np.mean(density(probe) >= visited))
 
 
+def sample_band(
+    space: TaskSpace,
+    density: Density,
+    rng: np.random.Generator,
+    n: int,
+    low: float,
+    high: float = np.inf,
+    candidates: int = 4096,
+    rounds: int = 8,
+) -> np.ndarray:
+    """Up to n points drawn uniformly from {a : low ≤ density(a) < high} by rejection from the
+    box: [m, d] with m ≤ n (fewer, possibly none, if the band is too thin to hit).
+    Exploration batches take (D', D): A_s; refinement restricts its MCMC to [D, ∞): A_h."""
+    found: list[np.ndarray] = []
+    for _ in range(rounds):
+        x = space.sample(rng, candidates)
+        rho = density(x)
+        found.append(x[(rho >= low) & (rho < high)])
+        if sum(len(f) for f in found) >= n:
+            break
+    return np.concatenate(found)[:n]
+
+
 @dataclass
 class PhaseSwitch:
     """[L21] §6.3: exploration until the exploration rate in A_s falls below the one in A_h,
