@@ -14,8 +14,16 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 
-# Task goals understood by ParamEnv besides the character's shape parameters.
-TASK_GOALS = {"target_velocity": "target average COM speed along +x (m/s)"}
+# Task goals and physical conditions understood by the environments besides the character's
+# shape parameters.
+TASK_GOALS = {
+    "target_velocity": "target average COM speed along +x (m/s)",
+    "gravity": "gravity as a multiple of 9.81 m/s² (skill env)",
+    "jump_height": "peak rise of the COM above its standing height (m, skill env)",
+}
+# Reference clips of the skill env, by name -> the characters they fit
+CLIPS = {"planar_jump": ("walker", "hopper"), "humanoid_jump": ("humanoid",)}
+CLIPS |= {f"humanoid_{n}": ("humanoid",) for n in ("walk", "run", "backflip", "cartwheel")}
 
 
 class Section(BaseModel):
@@ -39,6 +47,27 @@ class RewardConfig(Section):
     sigma_torque: PositiveFloat = 0.1  # σ6
 
 
+class SkillConfig(Section):
+    """Continuous-time imitation of a clip ([L21] §4): rewards Eq. 5-8, action (d, τ)."""
+
+    sigma_q: PositiveFloat = 3.16  # [L21] Eq. 7
+    sigma_ee: PositiveFloat = 0.8
+    sigma_com: PositiveFloat = 0.35
+    sigma_time: PositiveFloat = 0.1
+    w_q: float = Field(0.28, ge=0)
+    w_ee: float = Field(0.28, ge=0)
+    w_com: float = Field(0.28, ge=0)
+    w_time: float = Field(0.16, ge=0)
+    sigma_task: PositiveFloat = Field(0.1, description="σ_task of Eq. 8 (m for jump height)")
+    # [L21] §4.2: spike task rewards weigh (1.0, 10.0), continuous ones (0.9, 0.1)
+    w_tracking_spike: float = Field(1.0, ge=0)
+    w_task_spike: float = Field(10.0, ge=0)
+    w_tracking_continuous: float = Field(0.9, ge=0)
+    w_task_continuous: float = Field(0.1, ge=0)
+    tau_scale: PositiveFloat = Field(1.0, description="τ per unit action: Δφ in [e^-s, e^s]")
+    trace_bins: int = Field(16, ge=2, description="reference-time bins of a motion trace")
+
+
 class EnvConfig(Section):
     """Simulation, observation, reward and termination of ParamEnv."""
 
@@ -58,6 +87,10 @@ class EnvConfig(Section):
     max_pitch: PositiveFloat = Field(1.0, description="fall when the torso tilts more (rad)")
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
     reward: RewardConfig = RewardConfig()
+    clip: str | None = Field(
+        None, description="imitate this clip in continuous time ([L21]); None: [WL19] gaits"
+    )
+    skill: SkillConfig = SkillConfig()
 
 
 class PPOConfig(Section):
@@ -178,8 +211,19 @@ class ExperimentConfig(Section):
                 )
             if lo > hi:
                 raise ValueError(f"task.{name}: min {lo} > max {hi}")
-            if name != "target_velocity" and lo <= 0:
-                raise ValueError(f"task.{name}: body scales must be positive, got min {lo}")
+            if name not in ("target_velocity", "jump_height") and lo <= 0:
+                raise ValueError(f"task.{name}: scales must be positive, got min {lo}")
+        clip = self.env.clip
+        if clip is not None and self.character not in CLIPS.get(clip, ()):
+            raise ValueError(
+                f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
+                + ", ".join(f"{k} ({'/'.join(v)})" for k, v in CLIPS.items())
+            )
+        skill_only = {"gravity", "jump_height"} & set(self.task)
+        if clip is None and skill_only:
+            raise ValueError(f"task.{sorted(skill_only)[0]} needs env.clip (the skill env)")
+        if clip is not None and "target_velocity" in self.task:
+            raise ValueError("task.target_velocity is a [WL19] gait goal; the skill env has none")
         dims = self.curriculum.display_dims
         if dims is not None and (len(dims) != 2 or any(d not in self.task for d in dims)):
             raise ValueError(

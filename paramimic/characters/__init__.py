@@ -7,9 +7,10 @@ from paramimic.characters.body import (
     build_spec,
     compile_character,
 )
+from paramimic.characters.humanoid import HUMANOID
 from paramimic.characters.planar import HOPPER, WALKER
 
-CHARACTERS: dict[str, CharacterDef] = {c.name: c for c in (WALKER, HOPPER)}
+CHARACTERS: dict[str, CharacterDef] = {c.name: c for c in (WALKER, HOPPER, HUMANOID)}
 
 
 def get_character(name: str) -> CharacterDef:

@@ -15,6 +15,7 @@ from typing import Literal
 
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 DENSITY = 1000.0  # kg/m^3, constant for every shape so that mass follows volume
 TIMESTEP = 1.0 / 600.0  # [WL19] Table 2: 600 Hz simulation
@@ -82,6 +83,34 @@ class CharacterDef:
     @property
     def joints(self) -> tuple[Joint, ...]:
         return tuple(s.joint for s in self.segments if s.joint is not None)
+
+    @property
+    def root(self) -> str:
+        return self.segments[0].name
+
+    @property
+    def fall_bodies(self) -> tuple[str, ...]:
+        """Bodies whose contact with the ground is a fall."""
+        return (self.root,)
+
+    def pose_qpos(self, character: Character, pose) -> np.ndarray:
+        """qpos [n, nq] of clip poses (a `ClipPose` with world root heights): root x, z
+        relative to the body's build height, pitch about PLANAR_AXIS; joints by name."""
+        model = character.model
+        qpos = np.zeros((len(pose.root_position), model.nq))
+        qpos[:, 0] = pose.root_position[:, 0]
+        qpos[:, 1] = pose.root_position[:, 2] - character.hip_height
+        rotvec = Rotation.from_quat(pose.root_quat).as_rotvec()
+        qpos[:, 2] = rotvec @ np.array(PLANAR_AXIS)
+        for r, name in enumerate(pose.revolute_names):
+            qpos[:, model.jnt_qposadr[model.joint(name).id]] = pose.revolute[:, r]
+        return qpos
+
+    def compile(self, shape: dict[str, float] | None = None) -> Character:
+        built = build_spec(self, shape)
+        return index_character(
+            self, built.shape, built.spec.compile(), built.legs, built.hip_height, built.lengths
+        )
 
 
 @dataclass
@@ -191,7 +220,9 @@ def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) 
         act.ctrlrange = list(j.range)
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-j.torque, j.torque]  # torque limits, [L21] §7.4
-    _add_sensors(spec, definition)
+    add_sensors(
+        spec, [j.name for j in definition.joints], definition.end_effectors, definition.root
+    )
     return MjSpecResult(
         spec=spec,
         shape=shape,
@@ -210,22 +241,23 @@ class MjSpecResult:
     lengths: dict[str, float]
 
 
-def _add_sensors(spec: mujoco.MjSpec, definition: CharacterDef) -> None:
+def add_sensors(
+    spec: mujoco.MjSpec, joints: list[str], end_effectors: tuple[str, ...], root: str
+) -> None:
     """One contiguous sensordata block the environment reads per step, in this order:
     joint angles [nj], joint velocities [nj], end-effectors in the root frame [3 n_ee],
-    actuator torques [nj], root z axis [3], whole-body COM [3]."""
-    root = definition.segments[0].name
+    actuator torques [nj], root z axis [3], whole-body COM [3]. Actuators are named as joints."""
     obj = mujoco.mjtObj
     kinds = mujoco.mjtSensor
-    for j in definition.joints:
+    for j in joints:
         spec.add_sensor(
-            name=f"q_{j.name}", type=kinds.mjSENS_JOINTPOS, objtype=obj.mjOBJ_JOINT, objname=j.name
+            name=f"q_{j}", type=kinds.mjSENS_JOINTPOS, objtype=obj.mjOBJ_JOINT, objname=j
         )
-    for j in definition.joints:
+    for j in joints:
         spec.add_sensor(
-            name=f"dq_{j.name}", type=kinds.mjSENS_JOINTVEL, objtype=obj.mjOBJ_JOINT, objname=j.name
+            name=f"dq_{j}", type=kinds.mjSENS_JOINTVEL, objtype=obj.mjOBJ_JOINT, objname=j
         )
-    for e in definition.end_effectors:
+    for e in end_effectors:
         spec.add_sensor(
             name=f"ee_{e}",
             type=kinds.mjSENS_FRAMEPOS,
@@ -234,12 +266,12 @@ def _add_sensors(spec: mujoco.MjSpec, definition: CharacterDef) -> None:
             reftype=obj.mjOBJ_BODY,
             refname=root,
         )
-    for j in definition.joints:
+    for j in joints:
         spec.add_sensor(
-            name=f"tau_{j.name}",
+            name=f"tau_{j}",
             type=kinds.mjSENS_ACTUATORFRC,
             objtype=obj.mjOBJ_ACTUATOR,
-            objname=j.name,
+            objname=j,
         )
     spec.add_sensor(name="up", type=kinds.mjSENS_FRAMEZAXIS, objtype=obj.mjOBJ_BODY, objname=root)
     spec.add_sensor(name="com", type=kinds.mjSENS_SUBTREECOM, objtype=obj.mjOBJ_BODY, objname=root)
@@ -284,15 +316,26 @@ def _add_geom(
 
 def compile_character(definition: CharacterDef, shape: dict[str, float] | None = None) -> Character:
     """Build and compile; returns the model with the indices the environment uses."""
-    built = build_spec(definition, shape)
-    model = built.spec.compile()
+    return definition.compile(shape)
+
+
+def index_character(
+    definition,
+    shape: dict[str, float],
+    model: mujoco.MjModel,
+    legs: np.ndarray,
+    hip_height: float,
+    lengths: dict[str, float],
+) -> Character:
+    """The indices of a compiled model built with `add_sensors` and sites `{ee}_end`,
+    `{foot}_c0..3`. `definition` has `joints`, `end_effectors`, `feet` and `root`."""
     joints = definition.joints
     jids = [model.joint(j.name).id for j in joints]
     feet_sites = [f"{f}_c{i}" for f in definition.feet for i in range(4)]
-    root = model.body(definition.segments[0].name).id
+    root = model.body(definition.root).id
     return Character(
         definition=definition,
-        shape=built.shape,
+        shape=shape,
         model=model,
         qpos_idx=np.array([model.jnt_qposadr[j] for j in jids]),
         qvel_idx=np.array([model.jnt_dofadr[j] for j in jids]),
@@ -312,10 +355,10 @@ def compile_character(definition: CharacterDef, shape: dict[str, float] | None =
         up_sensor=_sensor_slice(model, "up"),
         com_sensor=_sensor_slice(model, "com"),
         root_body_id=root,
-        leg_lengths=built.legs,
+        leg_lengths=legs,
         mass=float(model.body_subtreemass[root]),
-        hip_height=built.hip_height,
-        segment_lengths=built.lengths,
+        hip_height=hip_height,
+        segment_lengths=lengths,
     )
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 TWO_PI = 2.0 * np.pi
 
@@ -67,3 +68,71 @@ HOPPER_GAIT = _motion(
 )
 
 REFERENCE_MOTIONS: dict[str, SinusoidalMotion] = {"walker": WALKER_GAIT, "hopper": HOPPER_GAIT}
+
+
+# --- planar jump clip ([L21] Jump at laptop scale) --------------------------------------------
+
+GRAVITY = 9.81
+JUMP_APEX = 0.12  # m the hip rises above its take-off height in the reference jump
+JUMP_FPS = 60.0
+# Keyframes (time s, torso pitch, hip, knee, ankle), both legs alike. Pitch and hip flexion are
+# positive about -y (pitch > 0 leans back, hip > 0 swings the thigh forward); a foot is flat on
+# the ground when pitch + hip + knee + ankle = 0.
+_TAKE_OFF, _FLIGHT = 0.8, 2.0 * np.sqrt(2.0 * JUMP_APEX / GRAVITY)
+_LAND = _TAKE_OFF + _FLIGHT
+JUMP_KEYS = np.array(
+    [
+        (0.00, 0.00, 0.00, 0.00, 0.00),  # stand
+        (0.20, -0.10, 0.25, -0.30, 0.15),
+        (0.50, -0.50, 1.20, -1.40, 0.70),  # crouch
+        (_TAKE_OFF, 0.00, 0.00, 0.00, -0.35),  # take-off: extended, on the toes
+        (_TAKE_OFF + _FLIGHT / 2, -0.10, 0.50, -0.70, 0.10),  # apex: a slight tuck
+        (_LAND, 0.00, 0.15, -0.20, 0.05),  # landing
+        (_LAND + 0.25, -0.40, 1.00, -1.20, 0.60),  # absorb
+        (_LAND + 0.70, 0.00, 0.00, 0.00, 0.00),  # stand
+        (_LAND + 0.90, 0.00, 0.00, 0.00, 0.00),
+    ]
+)
+
+
+def planar_jump_clip(
+    joints: tuple[str, ...], thigh: float, shin: float, foot: float, apex: float = JUMP_APEX
+):
+    """A jump in place for a planar character whose joints are (hip, knee, ankle) per leg:
+    crouch, take-off, a ballistic flight of `apex` m, landing and recovery, at 60 fps.
+
+    Angles interpolate with monotone cubics between the keyframes; the root height keeps the
+    flat feet on the ground in stance and follows the parabola of gravity in flight."""
+    from scipy.interpolate import PchipInterpolator
+
+    from paramimic.motion.clip import Clip
+
+    t = np.arange(0.0, JUMP_KEYS[-1, 0] + 1e-9, 1.0 / JUMP_FPS)
+    angles = PchipInterpolator(JUMP_KEYS[:, 0], JUMP_KEYS[:, 1:], axis=0)(t)
+    pitch, hip, knee, ankle = angles.T
+    stance_z = foot + thigh * np.cos(pitch + hip) + shin * np.cos(pitch + hip + knee)
+    z = stance_z.copy()
+    take_off_z = np.interp(_TAKE_OFF, t, stance_z)
+    v0 = np.sqrt(2.0 * GRAVITY * apex)
+    flight = (t > _TAKE_OFF) & (t < _TAKE_OFF + 2.0 * v0 / GRAVITY)
+    s = t[flight] - _TAKE_OFF
+    z[flight] = take_off_z + v0 * s - 0.5 * GRAVITY * s**2
+    legs = len(joints) // 3
+    revolute = np.tile(np.stack([hip, knee, ankle], axis=1), (1, legs))
+    n = len(t)
+    durations = np.full(n, 1.0 / JUMP_FPS)
+    durations[-1] = 0.0
+    return Clip(
+        name="planar_jump",
+        durations=durations,
+        root_position=np.stack([np.zeros(n), np.zeros(n), z], axis=1),
+        root_quat=Rotation.from_rotvec(np.outer(pitch, PITCH_AXIS)).as_quat(),
+        spherical_names=(),
+        spherical=np.zeros((n, 0, 4)),
+        revolute_names=tuple(joints),
+        revolute=revolute,
+        loop="none",
+    )
+
+
+PITCH_AXIS = np.array([0.0, -1.0, 0.0])  # planar root pitch axis (the characters' PLANAR_AXIS)

@@ -1,0 +1,198 @@
+"""The 3D humanoid of DeepMimic, built with MjSpec from its character description.
+
+Bodies, joint offsets, shapes, masses and torque limits come from `character_humanoid3d.txt`
+(shipped in `paramimic/data/deepmimic/`, MIT). Body frames keep the file's Y-up convention; the
+free root joint carries the Z-up world pose. Each spherical joint becomes three hinges about the
+local x, y, z axes in that order, so that every joint has a stable PD position servo (MuJoCo's
+position actuators need a scalar joint); a clip's joint quaternion maps onto them as intrinsic
+x-y-z Euler angles. Revolute joints (knees, elbows) are hinges about local z.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cached_property
+from importlib import resources
+
+import mujoco
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from paramimic.characters.body import TIMESTEP, Character, Joint, add_sensors, index_character
+from paramimic.motion.clip import ClipPose
+
+DATA = resources.files("paramimic") / "data" / "deepmimic"
+# PD gains of DeepMimic's humanoid3d controller (kp in N·m/rad; kd = kp / 10)
+KP = {"chest": 1000.0, "neck": 100.0, "hip": 500.0, "knee": 500.0, "ankle": 400.0}
+KP |= {"shoulder": 400.0, "elbow": 300.0}
+AXES = "xyz"
+EULER = "XYZ"  # intrinsic: the x hinge first, then y in the rotated frame, then z
+
+
+@dataclass(frozen=True)
+class HumanoidDef:
+    """The DeepMimic humanoid3d; the same interface as the planar `CharacterDef`."""
+
+    name: str = "humanoid"
+    end_effectors: tuple[str, ...] = ("right_ankle", "left_ankle", "right_wrist", "left_wrist")
+    feet: tuple[str, ...] = ("right_ankle", "left_ankle")
+    root: str = "root"
+    fall_bodies: tuple[str, ...] = ("root", "chest", "neck")  # DeepMimic's EnableFallContact
+
+    def param_names(self) -> tuple[str, ...]:
+        return ()
+
+    def default_shape(self) -> dict[str, float]:
+        return {}
+
+    @cached_property
+    def description(self) -> dict:
+        return json.loads((DATA / "character_humanoid3d.txt").read_text())
+
+    @cached_property
+    def skeleton(self) -> list[dict]:
+        return self.description["Skeleton"]["Joints"]
+
+    @cached_property
+    def joints(self) -> tuple[Joint, ...]:
+        """Actuated hinges in the order of the file's joints."""
+        out = []
+        for j in self.skeleton:
+            kp = next((v for k, v in KP.items() if j["Name"].endswith(k)), None)
+            if j["Type"] == "spherical":
+                for axis in AXES:
+                    lim = np.pi / 2 if axis == "y" else np.pi  # Euler y stays in ±π/2
+                    out.append(Joint(f"{j['Name']}_{axis}", (-lim, lim), kp, j["TorqueLim"]))
+            elif j["Type"] == "revolute":
+                out.append(
+                    Joint(j["Name"], (j["LimLow0"], j["LimHigh0"]), kp, float(j["TorqueLim"]))
+                )
+        return tuple(out)
+
+    @cached_property
+    def spherical(self) -> tuple[str, ...]:
+        return tuple(j["Name"] for j in self.skeleton if j["Type"] == "spherical")
+
+    @cached_property
+    def revolute(self) -> tuple[str, ...]:
+        return tuple(j["Name"] for j in self.skeleton if j["Type"] == "revolute")
+
+    def compile(self, shape: dict[str, float] | None = None) -> Character:
+        if shape:
+            raise KeyError(f"character {self.name!r} has no shape parameters, got {sorted(shape)}")
+        spec = self.spec()
+        model = spec.compile()
+        legs = np.array([0.421546 + 0.40987] * 2)  # thigh + shin of the file
+        return index_character(self, {}, model, legs, float(legs[0] + 0.05), {})
+
+    def spec(self) -> mujoco.MjSpec:
+        spec = mujoco.MjSpec()
+        spec.modelname = self.name
+        spec.compiler.degree = False
+        spec.option.timestep = TIMESTEP
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        spec.worldbody.add_geom(
+            name="floor",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[0, 0, 1],
+            friction=[1, 0.005, 1e-4],
+        )
+        spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1])
+        shapes = {b["Name"]: b for b in self.description["BodyDefs"]}
+        bodies: dict[int, mujoco.MjsBody] = {}
+        for j in self.skeleton:
+            parent = spec.worldbody if j["Parent"] < 0 else bodies[j["Parent"]]
+            pos = [j["AttachX"], j["AttachY"], j["AttachZ"]]
+            body = parent.add_body(name=j["Name"], pos=pos)
+            bodies[j["ID"]] = body
+            if j["Parent"] < 0:
+                body.add_freejoint(name="root")
+            elif j["Type"] == "spherical":
+                for axis in AXES:
+                    body.add_joint(
+                        name=f"{j['Name']}_{axis}",
+                        type=mujoco.mjtJoint.mjJNT_HINGE,
+                        axis=[float(axis == a) for a in AXES],
+                        armature=0.01,
+                    )
+            elif j["Type"] == "revolute":
+                body.add_joint(
+                    name=j["Name"],
+                    type=mujoco.mjtJoint.mjJNT_HINGE,
+                    axis=[0, 0, 1],
+                    range=[j["LimLow0"], j["LimHigh0"]],
+                    limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+                    armature=0.01,
+                )
+            _add_shape(body, shapes[j["Name"]])
+            if j["Name"] in self.end_effectors:
+                b = shapes[j["Name"]]
+                body.add_site(name=f"{j['Name']}_end", pos=[b["AttachX"], b["AttachY"], 0])
+        for joint in self.joints:
+            act = spec.add_actuator(
+                name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT
+            )
+            act.set_to_position(kp=joint.kp, kv=joint.kv_ratio * joint.kp)
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.ctrlrange = list(joint.range)
+            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.forcerange = [-joint.torque, joint.torque]
+        add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
+        return spec
+
+    def pose_qpos(self, character: Character, pose: ClipPose) -> np.ndarray:
+        """qpos [n, nq] of clip poses: free root (position, w-first quaternion) and the hinge
+        angles of each joint, found by name."""
+        model = character.model
+        n = len(pose.root_position)
+        qpos = np.zeros((n, model.nq))
+        qpos[:, 0:3] = pose.root_position
+        qpos[:, 3:7] = Rotation.from_quat(pose.root_quat).as_quat(scalar_first=True)
+        for s, name in enumerate(self.spherical):
+            angles = Rotation.from_quat(pose.spherical[:, s]).as_euler(EULER)
+            for i, axis in enumerate(AXES):
+                qpos[:, model.jnt_qposadr[model.joint(f"{name}_{axis}").id]] = angles[:, i]
+        for r, name in enumerate(self.revolute):
+            qpos[:, model.jnt_qposadr[model.joint(name).id]] = pose.revolute[:, r]
+        return qpos
+
+
+def _add_shape(body: mujoco.MjsBody, b: dict) -> None:
+    """A DeepMimic body shape: sphere (Param0 = diameter), capsule along local y (Param0 =
+    diameter, Param1 = cylinder length) or box (Param0..2 = full sizes), with its mass."""
+    center = np.array([b["AttachX"], b["AttachY"], b["AttachZ"]])
+    # Body geoms touch the floor but not each other, as in DeepMimic's collision groups.
+    common = dict(mass=float(b["Mass"]), contype=1, conaffinity=0, rgba=[0.47, 0.55, 0.69, 1])
+    geom = mujoco.mjtGeom
+    if b["Shape"] == "sphere":
+        body.add_geom(type=geom.mjGEOM_SPHERE, pos=center, size=[b["Param0"] / 2, 0, 0], **common)
+    elif b["Shape"] == "capsule":
+        half = np.array([0.0, b["Param1"] / 2, 0.0])
+        body.add_geom(
+            type=geom.mjGEOM_CAPSULE,
+            fromto=[*(center - half), *(center + half)],
+            size=[b["Param0"] / 2, 0, 0],
+            **common,
+        )
+    elif b["Shape"] == "box":
+        half = np.array([b["Param0"], b["Param1"], b["Param2"]]) / 2
+        body.add_geom(type=geom.mjGEOM_BOX, pos=center, size=half, **common)
+        for i, (sx, sz) in enumerate([(-1, -1), (-1, 1), (1, -1), (1, 1)]):
+            corner = center + half * np.array([sx, -1.0, sz])  # the sole: lowest face in y
+            body.add_site(name=f"{b['Name']}_c{i}", pos=corner)
+    else:
+        raise ValueError(f"unknown DeepMimic shape {b['Shape']!r} of body {b['Name']!r}")
+
+
+HUMANOID = HumanoidDef()
+
+
+def humanoid_clip(name: str):
+    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel."""
+    from paramimic.motion.clip import load_deepmimic
+
+    path = DATA / f"humanoid3d_{name}.txt"
+    if not path.is_file():
+        raise KeyError(f"no humanoid clip {name!r}; shipped: walk, run, jump, backflip, cartwheel")
+    return load_deepmimic(path, name=f"humanoid_{name}")

@@ -1,0 +1,447 @@
+"""SkillEnv: continuous-time imitation of one clip for a family of tasks ([L21] §3-5).
+
+The motion to imitate is m_a = (m0 ⊕ d̂)(φ) with the time increments τ̂ of a *trace*
+{(d̂, τ̂)} sampled at `trace_bins` reference times (Eq. 1-3); the caller passes it with the task
+(`options={"task": a, "motion": trace}`); no trace means m_a = m0 (τ̂ = 0).
+- action (d_t, τ_t): joint displacements and a log time increment; the reference advances by
+  Δφ = exp(τ_t) control steps while the simulation advances by Δt, and the PD target is
+  m0(φ') ⊕ d_t (§4.1);
+- reward: r = w_tracking r_tracking + w_task r_task (Eq. 5), tracking = 0.28 r_q + 0.28 r_ee +
+  0.28 r_com + 0.16 r_time (Eq. 6-7), continuous; the jump-height task reward (Eq. 8) is a spike
+  paid when the clip ends. Every transition reports Δφ for variable time-step GAE (Eq. 9);
+- when the episode ends it reports the trace it made (root displacement measured, joint
+  displacements and τ as acted), the parameter a' it achieved (hindsight) and its fitness F
+  (Eq. 10) against m0 (0 unless the clip was completed).
+Reference time φ is counted in control steps (Δφ = 1 is real time).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from paramimic.characters import Character, get_character
+from paramimic.config import EnvConfig
+from paramimic.curriculum.fitness import EpisodeTrace, fitness
+from paramimic.curriculum.task_space import TaskSpace
+from paramimic.envs.param_env import INSTABILITY, MAX_SPEED, _compiled
+from paramimic.motion.clip import Clip
+from paramimic.motion.parameterization import TAU_LIMIT
+
+G = 9.81
+CONTACT_HEIGHT = 0.03  # m: an end-effector of m0 this close to the ground is in contact (C_j)
+SKILL_TERMS = ("q", "ee", "com", "time", "task")
+
+
+def reference_clip(name: str, definition) -> Clip:
+    """The clip `name` for a character definition (see `paramimic.config.CLIPS`)."""
+    if name == "planar_jump":
+        from paramimic.motion.procedural import planar_jump_clip
+
+        legs = {s.name: s for s in definition.segments}
+        thigh, shin = (legs[n].length for n in definition.legs[0])
+        foot = legs[definition.feet[0]].thickness
+        return planar_jump_clip(tuple(j.name for j in definition.joints), thigh, shin, foot)
+    if name.startswith("humanoid_"):
+        from paramimic.characters.humanoid import humanoid_clip
+
+        return humanoid_clip(name.removeprefix("humanoid_"))
+    raise KeyError(f"unknown clip {name!r}")
+
+
+class SkillEnv(gym.Env):
+    metadata = {"render_modes": [], "render_fps": 30}
+
+    def __init__(
+        self,
+        character: str = "walker",
+        task: Mapping[str, tuple[float, float]] | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+    ) -> None:
+        self.definition = get_character(character)
+        self.config = (
+            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
+        )
+        if self.config.clip is None:
+            raise ValueError("SkillEnv needs env.clip")
+        self.skill = self.config.skill
+        self.task_space = TaskSpace.from_ranges(dict(task or {}))
+        names = self.task_space.names
+        shape_names = set(self.definition.param_names())
+        unknown = set(names) - shape_names - {"gravity", "jump_height"}
+        if unknown:
+            raise ValueError(f"unknown skill task parameters {sorted(unknown)} for {character!r}")
+        self._shape_idx = [(n, i) for i, n in enumerate(names) if n in shape_names]
+        self._gravity_idx = names.index("gravity") if "gravity" in names else None
+        self._height_idx = names.index("jump_height") if "jump_height" in names else None
+        self.clip = reference_clip(self.config.clip, self.definition)
+        self.frame_skip = self.config.frame_skip
+        self.character: Character | None = None
+        self._load(self.task_space.center)
+        self.dt = self.model.opt.timestep * self.frame_skip
+        # reference grid: one row per control step of reference time, φ = 0..n_ref-1
+        self.length = self.clip.duration / self.dt  # φ at which the clip ends
+        self.nj = len(self.character.qpos_idx)
+        self.root_nq = self.model.nq - self.nj
+        self.root_nv = self.model.nv - self.nj
+        self.trace_dim = self.root_nv + self.nj + 1  # (d_root, d_joints, τ) per bin
+        self.trace_shape = (self.skill.trace_bins, self.trace_dim)
+        self._bins = (np.arange(self.skill.trace_bins) + 0.5) * self.length / self.skill.trace_bins
+        self._max_steps = int(np.ceil(self.length * np.exp(TAU_LIMIT))) + 1
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.nj + 1,), np.float32)
+        self._task = self.task_space.center.copy()
+        self.reset(seed=0)
+        obs = self._observe()
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, obs.shape, np.float32)
+        w = self.skill
+        spike = self._height_idx is not None
+        self._w_tracking = w.w_tracking_spike if spike else 1.0  # §4.2: 1.0 without a task
+        self._w_task = w.w_task_spike if spike else 0.0
+
+    # --- body and reference ------------------------------------------------------------------
+
+    def _load(self, task: np.ndarray) -> None:
+        shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
+        c = _compiled(self.definition.name, shape)
+        if self.character is not None and self.character is c:
+            return
+        self.character = c
+        self.model = copy.copy(c.model)  # own copy: gravity changes per episode
+        self.data = mujoco.MjData(self.model)
+        self._scratch = mujoco.MjData(self.model)
+        self._fall_geoms = np.isin(
+            self.model.geom_bodyid, [self.model.body(b).id for b in self.definition.fall_bodies]
+        )
+        self._floor = self.model.geom("floor").id
+        dt = self.model.opt.timestep * self.frame_skip
+        phis = np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt
+        pose = self.clip.sample(phis)
+        if self.root_nq_of(c) == 3:  # planar: the clip is for the base body; keep feet down
+            base = _compiled(self.definition.name, ())
+            pose.root_position[:, 2] += c.hip_height - base.hip_height
+        self._q0 = self.definition.pose_qpos(c, pose)  # m0 on the grid [n_ref, nq]
+        ee0, com0, low0 = self._kinematics(self._q0)
+        self._feet = np.array(
+            [list(c.definition.end_effectors).index(f) for f in c.definition.feet]
+        )
+        self._ee_height0 = ee0[:, self._feet, 2]  # m0 end-effector heights (world) for F
+        self._contact0 = low0 < CONTACT_HEIGHT  # C_j of m0: foot near the ground
+        self._standing_com = com0[0, 2]
+
+    @staticmethod
+    def root_nq_of(c: Character) -> int:
+        return c.model.nq - len(c.qpos_idx)
+
+    def _kinematics(self, qpos: np.ndarray):
+        """World end-effectors [n, E, 3], COM [n, 3] and each foot's lowest point [n, F]."""
+        m, d, c = self.model, self._scratch, self.character
+        ee = np.empty((len(qpos), len(c.ee_site_ids), 3))
+        com = np.empty((len(qpos), 3))
+        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
+        low = np.empty((len(qpos), len(feet)))
+        for i, row in enumerate(qpos):
+            d.qpos[:] = row
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            ee[i] = d.site_xpos[c.ee_site_ids]
+            com[i] = d.subtree_com[c.root_body_id]
+            low[i] = d.site_xpos[feet, 2].min(axis=1)
+        return ee, com, low
+
+    def _displaced(self, q0: np.ndarray, d_root: np.ndarray, d_joints: np.ndarray) -> np.ndarray:
+        """m0 ⊕ d (Eq. 2) on qpos rows: root position + d0, root rotation ∘ exp(d1), joints + d."""
+        q = q0.copy()
+        q[:, self.character.qpos_idx] += d_joints
+        if self.root_nq == self.root_nv:  # planar root: x, z, pitch add
+            q[:, : self.root_nq] += d_root
+            return q
+        q[:, :3] += d_root[:, :3]
+        for i in range(len(q)):
+            quat = q[i, 3:7].copy()
+            mujoco.mju_quatIntegrate(quat, d_root[i, 3:], 1.0)  # q exp(d1), d1 in the local frame
+            q[i, 3:7] = quat
+        return q
+
+    def _root_displacement(self, qpos: np.ndarray, q0: np.ndarray, x0: float) -> np.ndarray:
+        """The simulated root relative to m0's, the start x aligned: [root_nv]."""
+        d = np.empty(self.root_nv)
+        if self.root_nq == self.root_nv:
+            d[:] = qpos[: self.root_nq] - q0[: self.root_nq]
+            d[0] -= x0
+            return d
+        d[:3] = qpos[:3] - q0[:3]
+        d[0] -= x0
+        mujoco.mju_subQuat(d[3:], qpos[3:7], q0[3:7])
+        return d
+
+    def _set_motion(self, trace: np.ndarray | None) -> None:
+        """Tabulate m_a on the reference grid: pose, end-effectors (root frame), COM, τ̂."""
+        grid = np.arange(len(self._q0), dtype=np.float64)
+        if trace is None:
+            trace = np.zeros(self.trace_shape)
+        trace = np.asarray(trace, np.float64)
+        if trace.shape != self.trace_shape:
+            raise ValueError(f"motion trace must have shape {self.trace_shape}, got {trace.shape}")
+        rows = np.stack(
+            [np.interp(grid, self._bins, trace[:, j]) for j in range(self.trace_dim)], 1
+        )
+        rn, nj = self.root_nv, self.nj
+        qa = self._displaced(self._q0, rows[:, :rn], rows[:, rn : rn + nj])
+        ee, com, _ = self._kinematics(qa)
+        self._qa = qa
+        self._eea = ee - com[:, None, :]  # end-effectors relative to the COM
+        self._coma = com
+        self._tau_hat = np.clip(rows[:, -1], -TAU_LIMIT, TAU_LIMIT)
+        self._trace_in = trace
+
+    def _at(self, table: np.ndarray, phi: float) -> np.ndarray:
+        x = min(max(phi, 0.0), len(table) - 1.000001)
+        k = int(x)
+        return table[k] + (x - k) * (table[k + 1] - table[k])
+
+    # --- episode ------------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        task = options.get("task")
+        if task is None:
+            a = self.task_space.sample(self.np_random, 1)[0]
+        else:
+            a = (
+                self.task_space.from_dict(task)
+                if isinstance(task, Mapping)
+                else np.asarray(task, dtype=np.float64).reshape(-1)
+            )
+            if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
+                raise ValueError(
+                    f"task {a} is not inside the task space {self.task_space.ranges()}"
+                )
+        self._task = a
+        self._load(a)
+        g = G * (a[self._gravity_idx] if self._gravity_idx is not None else 1.0)
+        self.model.opt.gravity[:] = (0.0, 0.0, -g)
+        self._set_motion(options.get("motion"))
+        m, d, c = self.model, self.data, self.character
+        mujoco.mj_resetData(m, d)
+        noise = self.config.init_noise
+        d.qpos[:] = self._qa[0]
+        d.qpos[c.qpos_idx] += noise * self.np_random.standard_normal(self.nj)
+        d.qvel[:] = 0.0
+        mujoco.mj_kinematics(m, d)
+        lowest = d.site_xpos[c.contact_site_ids, 2].min()
+        d.qpos[2 if self.root_nq == 7 else 1] -= lowest - 1e-3  # the lowest foot on the ground
+        d.ctrl[:] = np.clip(d.qpos[c.qpos_idx], c.ctrl_low, c.ctrl_high)
+        mujoco.mj_forward(m, d)
+        self._phi = 0.0
+        self._steps = 0
+        self._x0 = float(d.qpos[0])
+        self._unstable = int(d.warning.number[INSTABILITY].sum())
+        self._max_qvel_sq = m.nv * MAX_SPEED**2
+        self._peak_com = float(d.subtree_com[c.root_body_id, 2])
+        self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
+        self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
+        self._prev_q = d.qpos[c.qpos_idx].copy()
+        obs = self._observe()
+        self._last_obs = obs
+        return obs, {"task": a.copy()}
+
+    def step(self, action: np.ndarray):
+        m, d, c = self.model, self.data, self.character
+        action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
+        d_joints = action[: self.nj] * self.config.action_scale
+        tau = float(action[self.nj]) * self.skill.tau_scale
+        dphi = float(np.exp(tau))
+        phi_next = self._phi + dphi
+        # PD target m0(φ') ⊕ d_t (§4.1); the servo clamps it to the joint's control range
+        d.ctrl[:] = self._at(self._q0, phi_next)[c.qpos_idx] + d_joints
+        mujoco.mj_step(m, d, nstep=self.frame_skip)
+        self._steps += 1
+        self._phi = phi_next
+        qvel = d.qvel
+        if (
+            not qvel @ qvel < self._max_qvel_sq
+            or d.warning.number[INSTABILITY].sum() > self._unstable
+        ):
+            return self._end(self._last_obs, 0.0, 0.0, dphi, terminated=True, diverged=True)
+        com = d.subtree_com[c.root_body_id]
+        self._peak_com = max(self._peak_com, float(com[2]))
+        self._record(phi_next, d_joints, tau)
+        terms = self._tracking(phi_next, tau)
+        r_track = self.skill.w_q * terms[0] + self.skill.w_ee * terms[1]
+        r_track += self.skill.w_com * terms[2] + self.skill.w_time * terms[3]
+        reward = self._w_tracking * r_track
+        obs = self._observe()
+        self._last_obs = obs
+        fell = self._fell()
+        completed = phi_next >= self.length and not fell
+        if fell or completed or self._steps >= self._max_steps:
+            spike = 0.0
+            if completed and self._height_idx is not None:
+                # Eq. 8, a spike paid when the clip (the duration of the jump) ends
+                err = self.jump_height() - self._task[self._height_idx]
+                spike = self._w_task * float(np.exp(-(err**2) / self.skill.sigma_task**2))
+                terms.append(spike / max(self._w_task, 1e-12))
+            return self._end(
+                obs,
+                reward + spike,
+                spike,
+                dphi,
+                terminated=fell or completed,
+                terms=terms,
+                fell=fell,
+                completed=completed,
+            )
+        terms.append(0.0)
+        info = self._info(dphi, 0.0, terms, fell=False)
+        return obs, reward, False, False, info
+
+    def _tracking(self, phi: float, tau: float) -> list[float]:
+        """r_q, r_ee, r_com, r_time of Eq. 7 against m_a at φ."""
+        c, d, s = self.character, self.data, self.skill
+        qa = self._at(self._qa, phi)
+        dq = d.qpos[c.qpos_idx] - qa[c.qpos_idx]  # hinges: log(q̂⁻¹q) is the angle difference
+        com = d.subtree_com[c.root_body_id]
+        ee = d.site_xpos[c.ee_site_ids] - com
+        com_hat = self._at(self._coma, phi).copy()
+        com_hat[0] += self._x0
+        dt_hat = np.exp(self._at(self._tau_hat, phi))
+        return [
+            float(np.exp(-(dq @ dq) / s.sigma_q**2)),
+            float(np.exp(-np.sum((ee - self._at(self._eea, phi)) ** 2) / s.sigma_ee**2)),
+            float(np.exp(-np.sum((com - com_hat) ** 2) / s.sigma_com**2)),
+            float(np.exp(-((np.exp(tau) - dt_hat) ** 2) / s.sigma_time**2)),
+        ]
+
+    def _record(self, phi: float, d_joints: np.ndarray, tau: float) -> None:
+        """Per-step samples for the trace and the fitness against m0 at φ."""
+        c, d = self.character, self.data
+        q0 = self._at(self._q0, phi)
+        rec = self._rec
+        rec["phi"].append(phi)
+        rec["d"].append(
+            np.concatenate([self._root_displacement(d.qpos, q0, self._x0), d_joints, [tau]])
+        )
+        q = d.qpos[c.qpos_idx]
+        rec["pose"].append(q - q0[c.qpos_idx])
+        dq0 = (self._at(self._q0, phi + 0.5) - self._at(self._q0, phi - 0.5))[c.qpos_idx]
+        rec["vel"].append(np.stack([(q - self._prev_q) / self.dt, dq0 / self.dt], axis=0))
+        self._prev_q = q.copy()
+        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
+        rec["ee"].append(d.site_xpos[feet, 2].min(axis=1))
+        xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2]
+        rec["slide"].append(np.linalg.norm(xy - self._feet_xy, axis=1))
+        self._feet_xy = xy.copy()
+
+    def _fell(self) -> bool:
+        d = self.data
+        for i in range(d.ncon):
+            g1, g2 = d.contact.geom1[i], d.contact.geom2[i]
+            if (g1 == self._floor and self._fall_geoms[g2]) or (
+                g2 == self._floor and self._fall_geoms[g1]
+            ):
+                return True
+        return False
+
+    def jump_height(self) -> float:
+        """Peak rise of the COM above its standing height so far in this episode."""
+        return self._peak_com - self._standing_com
+
+    def _end(
+        self,
+        obs,
+        reward,
+        spike,
+        dphi,
+        terminated,
+        terms=None,
+        fell=False,
+        completed=False,
+        diverged=False,
+    ):
+        terms = terms if terms is not None else [0.0] * len(SKILL_TERMS)
+        if len(terms) < len(SKILL_TERMS):
+            terms = terms + [0.0]
+        info = self._info(dphi, spike, terms, fell=fell, diverged=diverged)
+        info["skill"] = self._summary(completed and not diverged)
+        truncated = not terminated
+        return obs, reward, terminated, truncated, info
+
+    def _info(self, dphi, spike, terms, fell, diverged=False) -> dict:
+        return {
+            "task": self._task.copy(),
+            "fell": fell,
+            "diverged": diverged,
+            "dphi": dphi,
+            "reward_spike": spike,
+            "reward_terms": dict(zip(SKILL_TERMS, terms, strict=True)),
+        }
+
+    def _summary(self, completed: bool) -> dict:
+        """Hindsight parameter a', fitness F (Eq. 10) and the trace of this episode."""
+        achieved = self._task.copy()
+        if self._height_idx is not None:
+            achieved[self._height_idx] = self.jump_height()
+        achieved = np.clip(achieved, self.task_space.low, self.task_space.high)
+        rec = self._rec
+        if not completed or len(rec["phi"]) < 2:
+            return {"achieved": achieved, "fitness": 0.0, "trace": None, "completed": False}
+        phi = np.asarray(rec["phi"])
+        d = np.asarray(rec["d"])
+        trace = np.stack([np.interp(self._bins, phi, d[:, j]) for j in range(d.shape[1])], 1)
+        vel = np.asarray(rec["vel"])  # [T, 2, J]
+        ee0 = np.stack(
+            [np.interp(phi, np.arange(len(self._ee_height0)), h) for h in self._ee_height0.T], 1
+        )
+        c0 = np.stack(
+            [
+                np.interp(phi, np.arange(len(self._contact0)), f.astype(float)) > 0.5
+                for f in self._contact0.T
+            ],
+            1,
+        )
+        f = fitness(
+            EpisodeTrace(
+                pose_error=np.abs(np.asarray(rec["pose"])),
+                velocity=vel[:, 0, :, None],
+                velocity_ref=vel[:, 1, :, None],
+                ee_height=np.asarray(rec["ee"]),
+                ee_height_ref=ee0,
+                contact_ref=c0,
+                ee_slide=np.asarray(rec["slide"]),
+            )
+        )
+        return {"achieved": achieved, "fitness": f, "trace": trace, "completed": True}
+
+    def _observe(self) -> np.ndarray:
+        c, d = self.character, self.data
+        phi = self._phi
+        root = c.root_body_id
+        xmat = d.xmat[root].reshape(3, 3)
+        com = d.subtree_com[root]
+        ee = (d.site_xpos[c.ee_site_ids] - d.xpos[root]) @ xmat  # root frame
+        nxt = phi + float(np.exp(self._at(self._tau_hat, phi)))
+        qa = self._at(self._qa, nxt)
+        return np.concatenate(
+            [
+                self._task,
+                d.qpos[c.qpos_idx],
+                d.qvel[c.qvel_idx],
+                d.qvel[: self.root_nv],
+                xmat.ravel(),
+                [com[2], d.xpos[root, 2], phi / self.length],
+                ee.ravel(),
+                qa[c.qpos_idx],  # the next frame of m_a: joint pose, root height, COM
+                [self._at(self._coma, nxt)[2], self._at(self._tau_hat, phi)],
+            ],
+            dtype=np.float32,
+        )
+
+    @property
+    def task(self) -> np.ndarray:
+        return self._task.copy()
