@@ -121,6 +121,56 @@ class PPOConfig(Section):
         return v
 
 
+class SkillCurriculumConfig(Section):
+    """Elites, P_θ, bootstrap and the exploration/refinement curriculum of [L21] §5-6.
+
+    Distances in the task space are measured on the box normalized to [0, 1] per free dimension
+    (A = diag(1/width²); the paper's A = I on its normalized parameters)."""
+
+    sampling: Literal["curriculum", "uniform"] = Field(
+        "curriculum", description="uniform: random task parameters (the baseline of [L21] §7.3)"
+    )
+    reference: dict[str, float] = Field(
+        default_factory=dict,
+        description="a of the reference motion m0 (default: gravity 1, body scales 1, the "
+        "clip's own jump height), where the base policy π0 trains",
+    )
+    batch_size: int = Field(20, ge=1, description="task parameters per batch ([L21] §6)")
+    episodes_per_param: int = Field(30, ge=1, description="episodes per parameter ([L21] §6)")
+    elite_radius: PositiveFloat = Field(0.1, description="r of Eq. 13 ([L21] §5.2)")
+    fitness_threshold: float = Field(0.1, ge=0, description="elites need F above it (§5.2)")
+    improvement: float = Field(0.02, ge=0, description="exploration-rate margin (§6.1)")
+    density_visited: PositiveFloat = Field(0.8, description="D: A_h where density >= D (§6.2)")
+    density_surrounding: PositiveFloat = Field(0.2, description="D': A_s from D' (§6.2)")
+    bandwidth: PositiveFloat = Field(0.1, description="kernel width h of Eq. 15 (normalized)")
+    refine_k: float = Field(10.0, ge=0, description="k of Eq. 17 in refinement ([L21] §6.2)")
+    probe_every: int = Field(4, ge=2, description="every n-th batch samples the other region")
+    knn_k: int = Field(5, ge=1, description="k of the kNN proxy (Eq. 14, §5.3)")
+    knn_sigma: PositiveFloat = Field(0.28, description="σ_k of Eq. 14 (§5.3)")
+    p_every: int = Field(10, ge=1, description="policy updates between P_θ fits (§7)")
+    p_steps: int = Field(10, ge=1, description="P_θ minibatch updates per fit (§7)")
+    p_hidden: tuple[int, ...] = Field((512, 512), description="P_θ layers (§7)")
+    p_lr: PositiveFloat = Field(1e-3, description="P_θ learning rate (§7)")
+    p_batch: int = Field(128, ge=1, description="P_θ minibatch (§7)")
+    p_loss_threshold: PositiveFloat = Field(
+        0.01, description="P_θ mean squared error per trace entry below which P_θ is used (§5.3)"
+    )
+    base_min_iterations: int = Field(5, ge=0, description="π0 trains at least this long")
+    base_max_iterations: int = Field(200, ge=0, description="π0 stops here even without plateau")
+    plateau_window: int = Field(10, ge=2, description="iterations compared for a plateau")
+    plateau_tolerance: float = Field(
+        0.02, ge=0, description="plateau: mean return grew by less than this share over a window"
+    )
+
+    @model_validator(mode="after")
+    def _bands(self) -> SkillCurriculumConfig:
+        if not self.density_surrounding < self.density_visited:
+            raise ValueError("density_surrounding (D') must be below density_visited (D)")
+        if self.base_max_iterations < self.base_min_iterations:
+            raise ValueError("base_max_iterations must be >= base_min_iterations")
+        return self
+
+
 class CurriculumConfig(Section):
     """Adaptive sampling of task parameters ([WL19] §4.2, Alg. 1, Table 2)."""
 
@@ -136,6 +186,7 @@ class CurriculumConfig(Section):
     display_dims: tuple[str, ...] | None = Field(
         None, description="two task dims for grids (default: the first two free)"
     )
+    skill: SkillCurriculumConfig = SkillCurriculumConfig()
 
 
 class ActorsConfig(Section):
@@ -224,6 +275,14 @@ class ExperimentConfig(Section):
             raise ValueError(f"task.{sorted(skill_only)[0]} needs env.clip (the skill env)")
         if clip is not None and "target_velocity" in self.task:
             raise ValueError("task.target_velocity is a [WL19] gait goal; the skill env has none")
+        for name, value in self.curriculum.skill.reference.items():
+            if name not in self.task:
+                raise ValueError(f"curriculum.skill.reference.{name}: not a task parameter")
+            lo, hi = self.task[name]
+            if not lo <= value <= hi:
+                raise ValueError(
+                    f"curriculum.skill.reference.{name}: {value} is outside [{lo}, {hi}]"
+                )
         dims = self.curriculum.display_dims
         if dims is not None and (len(dims) != 2 or any(d not in self.task for d in dims)):
             raise ValueError(

@@ -10,6 +10,9 @@ paramimic:run:{run}:history           sorted set: one JSON metrics record per it
 paramimic:run:{run}:curriculum        hash: core (JSON: rng, k, μ, counters), buffer (JSON),
                                       marginal (JSON V̄ layers), summary (JSON, for the API),
                                       grid (JSON V̄ over the display dims), digest
+                                      [L21]: elites (JSON: params, fitness, keys), motion
+                                      (JSON P_θ layers, version, loss), density (JSON grid)
+paramimic:run:{run}:traces            hash: elite key -> JSON trace [K][D] of (d, τ) ([L21])
 paramimic:run:{run}:seen              set: ingested episode ids (idempotent ingestion)
 paramimic:run:{run}:samples           list: the latest task batches (JSON), newest first
 paramimic:run:{run}:events            stream: type, message, data (JSON), time
@@ -44,6 +47,7 @@ class RunKeys:
         self.history = f"{base}:history"
         self.curriculum = f"{base}:curriculum"
         self.seen = f"{base}:seen"
+        self.traces = f"{base}:traces"
         self.samples = f"{base}:samples"
         self.events = f"{base}:events"
         self.control = f"{base}:control"

@@ -21,6 +21,8 @@ STAT_FIELDS = ("episodes", "steps", "falls", "diverged", "return_sum", "tasks_se
 class AdaptiveCurriculum:
     """Alg. 1 l.3 and l.7 of [WL19] (S refilled by MCMC on exp(-k(V̄-μ)/μ); tasks drawn from S)."""
 
+    STATE_PARTS = STATE_PARTS
+
     def __init__(
         self,
         space: TaskSpace,
@@ -29,6 +31,7 @@ class AdaptiveCurriculum:
         display_dims: Sequence[str] = (),
     ) -> None:
         self.space = space
+        self.config = config
         self.sampler = AdaptiveSampler(
             space, config.k, config.n_mcmc, config.chains, config.burn_in, seed=seed
         )
@@ -65,6 +68,10 @@ class AdaptiveCurriculum:
         self.stats["tasks_served"] += n
         self.stats["batches"] += 1
         return tasks
+
+    def next_deal(self, n: int) -> dict:
+        """The tasks of n episodes as a deal (the [L21] curriculum adds motions and tags)."""
+        return {"tasks": self.next_tasks(n)}
 
     def ingest(self, episodes: Iterable[dict]) -> int:
         """Count finished episodes (EpisodeSummary.to_dict()); the caller removes duplicates."""

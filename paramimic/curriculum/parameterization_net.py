@@ -8,7 +8,7 @@ import torch
 
 from paramimic.curriculum.marginal_value import scale_tasks
 from paramimic.curriculum.task_space import TaskSpace
-from paramimic.rl.networks import mlp
+from paramimic.rl.networks import mlp, numpy_layers
 
 
 class ParameterizationNet:
@@ -40,7 +40,7 @@ class ParameterizationNet:
         """`steps` minibatch updates of Eq. 12 on elite (a, trace) pairs; returns the mean loss
         per trace of the last one."""
         x_all = torch.as_tensor(scale_tasks(self.space, params), dtype=torch.float32)
-        y_all = torch.as_tensor(np.asarray(traces).reshape(len(params), -1), dtype=torch.float32)
+        y_all = torch.tensor(np.asarray(traces, np.float32).reshape(len(params), -1))
         for _ in range(steps):
             idx = self.rng.integers(0, len(params), size=min(self.batch_size, len(params)))
             loss = (self.net(x_all[idx]) - y_all[idx]).pow(2).sum(dim=1).mean()  # Eq. 12
@@ -50,3 +50,27 @@ class ParameterizationNet:
             self.loss = loss.item()
         self.version += 1
         return float(self.loss)
+
+    @property
+    def mse(self) -> float | None:
+        """The last fit's loss per trace entry (the bootstrap's threshold is on this)."""
+        return None if self.loss is None else self.loss / int(np.prod(self.trace_shape))
+
+    def layers(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(W, b) per layer as numpy, for `numpy_forward` where torch is not wanted."""
+        return numpy_layers(self.net)
+
+    def to_state(self) -> dict:
+        return {
+            "net": {k: v.detach().numpy().copy() for k, v in self.net.state_dict().items()},
+            "opt": self.opt.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "version": self.version,
+            "loss": self.loss,
+        }
+
+    def from_state(self, state: dict) -> None:
+        self.net.load_state_dict({k: torch.as_tensor(v) for k, v in state["net"].items()})
+        self.opt.load_state_dict(state["opt"])
+        self.rng.bit_generator.state = state["rng"]
+        self.version, self.loss = int(state["version"]), state["loss"]

@@ -3,6 +3,7 @@
 import gymnasium as gym
 
 from paramimic.envs.param_env import REWARD_TERMS, ParamEnv
+from paramimic.envs.skill_env import SkillEnv
 
 _ENTRY = "paramimic.envs.param_env:ParamEnv"
 _LEGS = (0.7, 1.3)
@@ -31,9 +32,12 @@ def register_envs() -> None:
 register_envs()
 
 
-def make_env(character: str, task: dict, env_config) -> ParamEnv:
-    """A ParamEnv for an experiment's character, task space and env section."""
+def make_env(character: str, task: dict, env_config) -> ParamEnv | SkillEnv:
+    """The environment of an experiment: the continuous-time SkillEnv ([L21]) when `env.clip`
+    names a clip, else ParamEnv ([WL19] gaits)."""
+    if getattr(env_config, "clip", None):
+        return SkillEnv(character=character, task=task, config=env_config)
     return ParamEnv(character=character, task=task, config=env_config)
 
 
-__all__ = ["REGISTERED", "REWARD_TERMS", "ParamEnv", "make_env", "register_envs"]
+__all__ = ["REGISTERED", "REWARD_TERMS", "ParamEnv", "SkillEnv", "make_env", "register_envs"]

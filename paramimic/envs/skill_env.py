@@ -132,6 +132,7 @@ class SkillEnv(gym.Env):
         self._ee_height0 = ee0[:, self._feet, 2]  # m0 end-effector heights (world) for F
         self._contact0 = low0 < CONTACT_HEIGHT  # C_j of m0: foot near the ground
         self._standing_com = com0[0, 2]
+        self._m0_rise = float(com0[:, 2].max() - com0[0, 2])
 
     @staticmethod
     def root_nq_of(c: Character) -> int:
@@ -347,6 +348,14 @@ class SkillEnv(gym.Env):
             ):
                 return True
         return False
+
+    def reference_task(self) -> np.ndarray:
+        """a0, the parameter of m0 itself: gravity 1, body scales 1 and the clip's own jump
+        height (the COM rise of m0 on the current body), clipped into the task space."""
+        a = np.ones(self.task_space.dim)
+        if self._height_idx is not None:
+            a[self._height_idx] = self._m0_rise
+        return np.clip(a, self.task_space.low, self.task_space.high)
 
     def jump_height(self) -> float:
         """Peak rise of the COM above its standing height so far in this episode."""

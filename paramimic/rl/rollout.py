@@ -13,23 +13,32 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from paramimic.envs import REWARD_TERMS, ParamEnv
+from paramimic.envs import ParamEnv
 from paramimic.rl.networks import ActorCritic, NumpyPolicy
 
-TaskSource = Callable[[int], np.ndarray]  # n -> [n, d] task parameters
+# n -> [n, d] task parameters, or a deal: {"tasks": [n, d], "motions": [n, K, D] | None, ...}
+# (the [L21] curriculum's tasks with the motions m_a to imitate and the batch they belong to)
+TaskSource = Callable[[int], "np.ndarray | dict"]
+DEAL_TAGS = ("batch", "region", "motion_version")  # copied from a deal into episode summaries
 
 
 class TaskQueue:
-    """A batch of task parameters handed out in order; it starts over if it runs out."""
+    """A batch of task parameters (or a deal) handed out in order; it starts over if it runs
+    out. Calls return deals: {"tasks": [n, d], "motions": [n, K, D] | None, tags}."""
 
-    def __init__(self, tasks: np.ndarray) -> None:
-        self.tasks = np.asarray(tasks, dtype=np.float64)
+    def __init__(self, tasks: np.ndarray | dict) -> None:
+        deal = tasks if isinstance(tasks, dict) else {"tasks": tasks}
+        self.tasks = np.asarray(deal["tasks"], dtype=np.float64)
+        motions = deal.get("motions")
+        self.motions = None if motions is None else np.asarray(motions, np.float64)
+        self.tags = {k: deal[k] for k in DEAL_TAGS if k in deal}
         self.next = 0
 
-    def __call__(self, n: int) -> np.ndarray:
+    def __call__(self, n: int) -> dict:
         idx = (self.next + np.arange(n)) % len(self.tasks)
         self.next += n
-        return self.tasks[idx]
+        motions = None if self.motions is None else self.motions[idx]
+        return {"tasks": self.tasks[idx], "motions": motions, **self.tags}
 
 
 def tasks_per_fragment(num_envs: int, num_steps: int) -> int:
@@ -46,9 +55,11 @@ class EpisodeSummary:
     fell: bool
     diverged: bool
     reward_terms: dict[str, float]  # per-term sums over the episode
+    # [L21] episodes: achieved a', fitness F, trace, and the deal's batch/region/motion version
+    skill: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             "episode_id": self.episode_id,
             "task": self.task.tolist(),
             "return": self.ret,
@@ -57,6 +68,9 @@ class EpisodeSummary:
             "diverged": self.diverged,
             "reward_terms": self.reward_terms,
         }
+        for k, v in self.skill.items():
+            out[k] = v.tolist() if isinstance(v, np.ndarray) else v
+        return out
 
 
 @dataclass
@@ -118,18 +132,35 @@ class RolloutWorker:
             self.fast_policy = NumpyPolicy(self.policy)
             self.policy_version = version
 
-    def _tasks(self, n: int) -> np.ndarray | None:
-        return None if self.task_source is None else np.asarray(self.task_source(n))
+    def _tasks(self, n: int) -> list[dict] | None:
+        """Reset options of the next n episodes: task, motion (if any) and the deal's tags."""
+        if self.task_source is None:
+            return None
+        deal = self.task_source(n)
+        if not isinstance(deal, dict):
+            deal = {"tasks": deal}
+        tasks, motions = np.asarray(deal["tasks"]), deal.get("motions")
+        tags = {k: deal[k] for k in DEAL_TAGS if k in deal}
+        return [
+            {"task": tasks[j], "motion": None if motions is None else motions[j], "tags": tags}
+            for j in range(n)
+        ]
 
-    def _start(self, i: int, task: np.ndarray | None, seed: int | None = None) -> np.ndarray:
+    def _start(self, i: int, start: dict | None, seed: int | None = None) -> np.ndarray:
         env = self.envs[i]
-        obs, info = env.reset(seed=seed, options=None if task is None else {"task": task})
+        options = None
+        if start is not None:
+            options = {"task": start["task"]}
+            if start["motion"] is not None:
+                options["motion"] = start["motion"]
+        obs, info = env.reset(seed=seed, options=options)
         self._ep[i] = {
             "id": f"{self.id_prefix}w{self.worker_id}-s{self._seed}-e{self._episode_counter}",
             "task": info["task"],
             "ret": 0.0,
             "len": 0,
-            "terms": dict.fromkeys(REWARD_TERMS, 0.0),
+            "terms": {},
+            "tags": {} if start is None else start["tags"],
         }
         self._episode_counter += 1
         return obs
@@ -137,10 +168,10 @@ class RolloutWorker:
     def _reset_all(self) -> None:
         m = len(self.envs)
         self._ep = [{} for _ in range(m)]
-        tasks = self._tasks(m)
+        starts = self._tasks(m)
         seeds = self.rng.integers(0, 2**31 - 1, size=m)
         self._obs = np.stack(
-            [self._start(i, None if tasks is None else tasks[i], int(seeds[i])) for i in range(m)]
+            [self._start(i, None if starts is None else starts[i], int(seeds[i])) for i in range(m)]
         )
 
     def collect(
@@ -193,7 +224,7 @@ class RolloutWorker:
                 ep["len"] += 1
                 terms = ep["terms"]
                 for k, v in info["reward_terms"].items():
-                    terms[k] += v
+                    terms[k] = terms.get(k, 0.0) + v
                 if te or tr:
                     if tr:
                         final_obs.append((t, i, results[i][0]))
@@ -206,6 +237,7 @@ class RolloutWorker:
                             bool(info["fell"]),
                             bool(info["diverged"]),
                             terms,
+                            _skill_fields(info, ep["tags"]),
                         )
                     )
                     ended.append(i)
@@ -218,9 +250,9 @@ class RolloutWorker:
             trunc[t] = tr_list
             next_obs = np.stack(obs_list)
             if ended:
-                new_tasks = self._tasks(len(ended))
+                starts = self._tasks(len(ended))
                 for j, i in enumerate(ended):
-                    next_obs[i] = self._start(i, None if new_tasks is None else new_tasks[j])
+                    next_obs[i] = self._start(i, None if starts is None else starts[j])
                     tasks.append(self._ep[i]["task"])
                     current[i] = len(tasks) - 1
             obs = next_obs
@@ -248,3 +280,15 @@ class RolloutWorker:
             episodes,
             self.policy_version,
         )
+
+
+def _skill_fields(info: dict, tags: dict) -> dict:
+    """What an [L21] episode reports to the curriculum: a', F, its trace, and the deal's tags."""
+    skill = info.get("skill")
+    if skill is None:
+        return {}
+    return dict(tags) | {
+        "achieved": skill["achieved"],
+        "fitness": skill["fitness"],
+        "trace": skill["trace"],
+    }

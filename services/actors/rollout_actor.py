@@ -65,16 +65,17 @@ class RolloutActor:
         weights: list[ray.ObjectRef],
         version: int,
         num_steps: int,
-        tasks: int | np.ndarray,
+        tasks: int | np.ndarray | dict,
         use_policy: bool = True,
     ) -> Fragment:
-        """One fragment whose episodes take `tasks` (an array) or that many tasks from the
-        sampler. `weights` is a one-element list so that Ray does not fetch the (unchanged)
-        weights on every call: they are read only when `version` is new."""
+        """One fragment whose episodes take `tasks` (an array or a deal) or that many tasks
+        from the sampler (a deal: with [L21] the motions m_a to imitate). `weights` is a
+        one-element list so that Ray does not fetch the (unchanged) weights on every call:
+        they are read only when `version` is new."""
         if version != self.worker.policy_version:
             self.worker.set_weights(ray.get(weights[0]), version)
         if isinstance(tasks, int):
-            tasks = ray.get(self.sampler.next_tasks.remote(tasks, self.source))
+            tasks = ray.get(self.sampler.next_deal.remote(tasks, self.source))
         fragment = self.worker.collect(num_steps, tasks, use_policy)
         if self.sampler is not None:  # acknowledged before the learner sees the fragment
             ray.get(self.sampler.ingest.remote([e.to_dict() for e in fragment.episodes]))

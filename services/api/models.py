@@ -45,7 +45,10 @@ class HistoryPage(BaseModel):
 
 class Curriculum(BaseModel):
     run_id: str
-    mode: str = Field(description="adaptive ([WL19] MCMC on exp(-k(V̄-μ)/μ)) or uniform (k = 0)")
+    mode: str = Field(
+        description="adaptive ([WL19] MCMC on exp(-k(V̄-μ)/μ)), uniform (k = 0 or [L21] uniform "
+        "task sampling) or skill (the [L21] exploration/refinement curriculum)"
+    )
     k: float
     mu: float | None = Field(description="μ, the running mean of V̄")
     marginal_iteration: int = Field(description="iteration of the V̄ the sampler holds")
@@ -60,10 +63,29 @@ class Curriculum(BaseModel):
     fall_percent: float | None
     tasks_served: int
     paused: bool
-    phase: str | None = Field(None, description="[L21] §6 phase (Part 4)")
-    explored_ratio: float | None = None
-    exploration_rate_surrounding: float | None = None
-    exploration_rate_visited: float | None = None
+    phase: str | None = Field(
+        None, description="[L21] §6: base (π0), exploration, refinement, or uniform"
+    )
+    explored_ratio: float | None = Field(None, description="ER: share of the task space in A_h")
+    exploration_rate_surrounding: float | None = Field(
+        None, description="elites improved per episode in batches from A_s (§6.1)"
+    )
+    exploration_rate_visited: float | None = Field(
+        None, description="elites improved per episode in batches from A_h (§6.1)"
+    )
+    stage: str | None = Field(None, description="[L21] §5.3 bootstrap: base, proxy or mixed")
+    elites: int | None = Field(None, description="size of the elite set")
+    elite_mean_fitness: float | None = None
+    phase_switches: int | None = None
+    motion_version: int | None = Field(None, description="version of P_θ the sampler holds")
+    motion_loss: float | None = Field(None, description="P_θ's loss per trace entry (Eq. 12)")
+    batch: int | None = None
+    batch_region: str | None = None
+    reference: dict[str, float] | None = Field(None, description="a0, the parameter of m0")
+    task_ranges: dict[str, list[float]] | None = None
+    history: list[dict[str, float]] | None = Field(
+        None, description="ER against N (episodes), one point per finished batch"
+    )
     updated_at: float | None = None
 
 
@@ -83,6 +105,34 @@ class TaskBatch(BaseModel):
     source: str = Field(description="who asked: actorN or learner")
     names: list[str]
     tasks: list[list[float]]
+    region: str | None = Field(None, description="[L21]: where the batch was drawn")
+    batch: int | None = None
+
+
+class Elite(BaseModel):
+    key: str = Field(description="the episode id of the elite")
+    params: dict[str, float] = Field(description="a', the parameter the episode achieved")
+    fitness: float
+    distance: float | None = Field(None, description="normalized distance to ?near=")
+
+
+class Elites(BaseModel):
+    run_id: str
+    names: list[str]
+    total: int = Field(description="elites in the set")
+    items: list[Elite]
+
+
+class DensityGrid(BaseModel):
+    run_id: str
+    available: bool = Field(description="false until the sampler has written a snapshot")
+    dims: list[str] = []
+    xs: list[float] = []
+    ys: list[float] = []
+    values: list[list[float]] = Field([], description="Eq. 15 at (xs[j], ys[i]) in values[i][j]")
+    visited: float | None = Field(None, description="D: A_h where density >= D")
+    surrounding: float | None = Field(None, description="D': A_s where D' <= density < D")
+    elites: int | None = None
 
 
 class Event(BaseModel):

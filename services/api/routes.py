@@ -7,6 +7,7 @@ import json
 import secrets
 from typing import Annotated
 
+import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from redis.asyncio import Redis
@@ -14,6 +15,9 @@ from redis.asyncio import Redis
 from services.api.models import (
     Accepted,
     Curriculum,
+    DensityGrid,
+    Elite,
+    Elites,
     Event,
     Health,
     HistoryPage,
@@ -184,6 +188,91 @@ async def marginal_value(run: RunId, r: RedisDep):
     if not data:
         return MarginalValueGrid(run_id=run, available=False)
     return MarginalValueGrid(run_id=run, available=True, **data)
+
+
+def _floats(name: str, text: str | None, dim: int) -> np.ndarray | None:
+    if text is None:
+        return None
+    try:
+        values = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        values = np.array([])
+    if values.shape != (dim,) or not np.all(np.isfinite(values)):
+        raise HTTPException(
+            status.HTTP_422_UNPROCESSABLE_ENTITY,
+            f"{name} must be {dim} comma-separated finite numbers, one per task parameter",
+        )
+    return values
+
+
+async def _skill_state(r: Redis, run: str, field: str) -> tuple[RunKeys, dict, dict | None]:
+    """The run's [L21] curriculum summary and one of its JSON fields; 404 for other runs."""
+    keys, _ = await run_status(r, run)
+    summary, value = await r.hmget(keys.curriculum, ["summary", field])
+    s = json.loads(summary) if summary else {}
+    if s.get("task_ranges") is None:
+        raise HTTPException(
+            status.HTTP_404_NOT_FOUND,
+            f"run {run!r} has no [L21] skill curriculum (no elite set or density)",
+        )
+    return keys, s, json.loads(value) if value else None
+
+
+@router.get("/runs/{run}/curriculum/elites", response_model=Elites, tags=["curriculum"])
+async def elites(
+    run: RunId,
+    r: RedisDep,
+    near: Annotated[
+        str | None, Query(max_length=2000, description="a point 'x1,x2,...': its k nearest")
+    ] = None,
+    k: Annotated[int, Query(ge=1, le=1000, description="how many nearest to ?near=")] = 5,
+    low: Annotated[str | None, Query(max_length=2000, description="box corner 'x1,...'")] = None,
+    high: Annotated[str | None, Query(max_length=2000, description="box corner 'x1,...'")] = None,
+    limit: Annotated[int, Query(ge=1, le=100_000)] = 1000,
+):
+    """The elite set ([L21] §5.2): all, those within the box [low, high], or the k nearest to
+    a point (distance on the task box normalized per dimension), with their fitness."""
+    _, summary, table = await _skill_state(r, run, "elites")
+    names = list(summary["task_ranges"])
+    table = table or {"params": [], "fitness": [], "keys": []}
+    params = np.asarray(table["params"], np.float64).reshape(-1, len(names))
+    fitness = np.asarray(table["fitness"], np.float64)
+    lo_hi = np.array(list(summary["task_ranges"].values()), np.float64).reshape(-1, 2)
+    width = lo_hi[:, 1] - lo_hi[:, 0]
+    point = _floats("near", near, len(names))
+    box_low, box_high = _floats("low", low, len(names)), _floats("high", high, len(names))
+    rows = np.arange(len(params))
+    if box_low is not None or box_high is not None:
+        lo = box_low if box_low is not None else np.full(len(names), -np.inf)
+        hi = box_high if box_high is not None else np.full(len(names), np.inf)
+        rows = rows[np.all((params >= lo) & (params <= hi), axis=1)]
+    distance = None
+    if point is not None:
+        scaled = (params[rows] - point) / np.where(width > 0, width, np.inf)
+        distance = np.sqrt((scaled**2).sum(axis=1))
+        order = np.argsort(distance, kind="stable")[:k]
+        rows, distance = rows[order], distance[order]
+    rows = rows[:limit]
+    items = [
+        Elite(
+            key=table["keys"][i],
+            params=dict(zip(names, params[i].tolist(), strict=True)),
+            fitness=float(fitness[i]),
+            distance=None if distance is None else float(distance[j]),
+        )
+        for j, i in enumerate(rows)
+    ]
+    return Elites(run_id=run, names=names, total=len(params), items=items)
+
+
+@router.get("/runs/{run}/curriculum/density", response_model=DensityGrid, tags=["curriculum"])
+async def density(run: RunId, r: RedisDep):
+    """The KDE density of the elites (Eq. 15) over the two display dimensions (the others at
+    the reference), with the thresholds that split A_h, A_s and the unvisited rest."""
+    _, _, grid = await _skill_state(r, run, "density")
+    if not grid:
+        return DensityGrid(run_id=run, available=False)
+    return DensityGrid(run_id=run, available=True, **grid)
 
 
 @router.get("/runs/{run}/curriculum/samples", response_model=list[TaskBatch], tags=["curriculum"])

@@ -43,7 +43,7 @@ def resolve_num_actors(setting: int | str) -> int:
 
 
 class SamplerClient:
-    """The learner's view of the sampler actor: the calls of a local AdaptiveCurriculum."""
+    """The learner's view of the sampler actor: the calls of a local curriculum."""
 
     def __init__(self, handle: ray.actor.ActorHandle) -> None:
         self.handle = handle
@@ -51,8 +51,17 @@ class SamplerClient:
     def next_tasks(self, n: int) -> np.ndarray:
         return ray.get(self.handle.next_tasks.remote(n, "learner"))
 
+    def next_deal(self, n: int) -> dict:
+        return ray.get(self.handle.next_deal.remote(n, "learner"))
+
     def ingest(self, episodes: list[dict]) -> int:
         return ray.get(self.handle.ingest.remote(episodes))
+
+    def elite_data(self) -> tuple[np.ndarray, np.ndarray]:
+        return ray.get(self.handle.elite_data.remote())
+
+    def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None:
+        ray.get(self.handle.update_motion.remote(layers, version, loss, stage))
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
         ray.get(self.handle.update_marginal.remote(layers, mu, iteration, refill))

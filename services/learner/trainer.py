@@ -20,8 +20,10 @@ import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.curriculum import MarginalValue, TaskSpace
-from paramimic.curriculum.adaptive import AdaptiveCurriculum
+from paramimic.curriculum.bootstrap import Bootstrap
 from paramimic.curriculum.marginal_value import Layers
+from paramimic.curriculum.parameterization_net import ParameterizationNet
+from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.rl.ppo import PPOLearner
 from paramimic.rl.rollout import EpisodeSummary, Fragment, RolloutWorker, tasks_per_fragment
@@ -33,11 +35,18 @@ class Curriculum(Protocol):
 
     def next_tasks(self, n: int) -> np.ndarray: ...
 
+    def next_deal(self, n: int) -> dict: ...
+
     def ingest(self, episodes: list[dict]) -> int: ...
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None: ...
 
     def set_k(self, k: float) -> None: ...
+
+    # [L21] curricula only (SkillCurriculum, or the sampler actor that owns one)
+    def elite_data(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None: ...
 
     def summary(self) -> dict: ...
 
@@ -81,7 +90,7 @@ class SerialBackend:
 
     def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:
         self.worker.set_weights(weights, version)
-        fragment = self.worker.collect(self.steps, self.curriculum.next_tasks(self.n_tasks))
+        fragment = self.worker.collect(self.steps, self.curriculum.next_deal(self.n_tasks))
         self.curriculum.ingest([e.to_dict() for e in fragment.episodes])
         return [fragment]
 
@@ -121,7 +130,16 @@ class Trainer:
             cc.marginal_batch,
             seed=seed + 2,
         )
-        self.curriculum = curriculum or AdaptiveCurriculum.from_config(cfg)
+        self.skill = cfg.env.clip is not None
+        self.motion_net: ParameterizationNet | None = None
+        self.bootstrap: Bootstrap | None = None
+        if self.skill:  # [L21]: P_θ and the bootstrap stages
+            sc = cc.skill
+            self.motion_net = ParameterizationNet(
+                self.space, probe.trace_shape, sc.p_hidden, sc.p_lr, sc.p_batch, seed=seed + 4
+            )
+            self.bootstrap = Bootstrap(sc)
+        self.curriculum = curriculum or new_curriculum(cfg)
         self.progress = Progress()
 
     # --- state --------------------------------------------------------------------------------
@@ -132,6 +150,8 @@ class Trainer:
             "learner": self.learner.state_dict(),
             "marginal": self.marginal.to_state(),
             "curriculum": self.curriculum.to_state(),
+            "motion_net": None if self.motion_net is None else self.motion_net.to_state(),
+            "bootstrap": None if self.bootstrap is None else self.bootstrap.to_state(),
             "progress": vars(self.progress).copy(),
             "obs_dim": self.obs_dim,
             "act_dim": self.act_dim,
@@ -141,6 +161,9 @@ class Trainer:
         self.learner.load_state_dict(state["learner"])
         self.marginal.from_state(state["marginal"])
         self.curriculum.from_state(state["curriculum"])
+        if self.motion_net is not None:
+            self.motion_net.from_state(state["motion_net"])
+            self.bootstrap.from_state(state["bootstrap"])
         self.progress = Progress(**state["progress"])
 
     def save_checkpoint(self) -> Path:
@@ -167,8 +190,10 @@ class Trainer:
         self.progress.iteration += 1
         self.progress.env_steps += steps
         self.progress.episodes += len(episodes)
-        elapsed = time.perf_counter() - t0
         metrics.update(episode_metrics(episodes))
+        if self.skill:
+            metrics.update(self.update_motion(metrics.get("mean_return")))
+        elapsed = time.perf_counter() - t0
         metrics.update(backend.stats())
         # versions between the policy that sampled each fragment and the one that was updated
         metrics["policy_lag"] = float(
@@ -187,6 +212,24 @@ class Trainer:
             }
         )
         return metrics
+
+    def update_motion(self, mean_return: float | None) -> dict:
+        """[L21] §5.2-5.3: fit P_θ on the elites every `p_every` updates, advance the bootstrap
+        stage, and send both to the curriculum (which deals m_a with the tasks)."""
+        sc, it = self.cfg.curriculum.skill, self.progress.iteration
+        net, boot = self.motion_net, self.bootstrap
+        fitted = False
+        if it % sc.p_every == 0:
+            params, traces = self.curriculum.elite_data()
+            if len(params) >= 2:
+                net.fit(params, traces, sc.p_steps)
+                fitted = True
+        before = boot.stage
+        stage = boot.observe(it, mean_return, net.mse)
+        if fitted or stage != before:
+            layers = net.layers() if net.loss is not None else None
+            self.curriculum.update_motion(layers, net.version, net.mse, stage)
+        return {"stage": stage, "motion_version": net.version, "motion_loss": net.mse}
 
     def train(
         self,

@@ -22,13 +22,15 @@ from collections.abc import Iterable
 import numpy as np
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum.adaptive import STATE_PARTS, AdaptiveCurriculum
 from paramimic.curriculum.marginal_value import Layers
+from paramimic.curriculum.skill import new_curriculum
 from services.keys import SAMPLES_LIMIT, RunKeys
 from services.store import add_event, connect
 
 RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
-GRID_SIZE = 21  # points per display dimension of the V̄ snapshot
+GRID_SIZE = 21  # points per display dimension of the V̄ and density snapshots
+DENSITY_EVERY = 2.0  # seconds between density snapshots while the elite set changes
+TRACES = "traces"  # the state part kept in its own hash (one field per elite), not as JSON
 
 
 class SamplerService:
@@ -40,20 +42,26 @@ class SamplerService:
         restarted: bool = False,
         retry_seconds: float = 120.0,
     ) -> None:
-        self.curriculum = AdaptiveCurriculum.from_config(ExperimentConfig.model_validate(config))
+        self.curriculum = new_curriculum(ExperimentConfig.model_validate(config))
+        self.parts = self.curriculum.STATE_PARTS
+        self.skill = TRACES in self.parts  # the [L21] curriculum
         self.keys = RunKeys(run_id)
         self.recent_ids: deque[str] = deque(maxlen=RECENT_IDS)
         self.rewrite_all = True
+        self.density_at = 0.0
         self.redis = connect(redis_url, retry_seconds, on_connect=self._reconnected)
-        stored = self.redis.hmget(self.keys.curriculum, list(STATE_PARTS))
+        fields = [p for p in self.parts if p != TRACES]
+        stored = self.redis.hmget(self.keys.curriculum, fields)
         if all(v is not None for v in stored):  # a restart: continue where it was
-            self.curriculum.from_state(
-                {p: json.loads(v) for p, v in zip(STATE_PARTS, stored, strict=True)}
-            )
+            state = {p: json.loads(v) for p, v in zip(fields, stored, strict=True)}
+            if self.skill:
+                traces = self.redis.hgetall(self.keys.traces)
+                state[TRACES] = {k.decode(): json.loads(v) for k, v in traces.items()}
+            self.curriculum.from_state(state)
             kind = "sampler_restarted" if restarted else "sampler_started"
-            self._commit(STATE_PARTS, event=(kind, "sampler reloaded its state from Redis"))
+            self._commit(self.parts, event=(kind, "sampler reloaded its state from Redis"))
         else:
-            self._commit(STATE_PARTS, event=("sampler_started", "sampler started fresh"))
+            self._commit(self.parts, event=("sampler_started", "sampler started fresh"))
 
     def _reconnected(self) -> None:
         self.rewrite_all = True
@@ -69,13 +77,16 @@ class SamplerService:
         for attempt in range(2):
             full = self.rewrite_all
             self.rewrite_all = False
-            wanted = STATE_PARTS if full else tuple(parts)
-            fields = {p: json.dumps(v) for p, v in self.curriculum.to_state(wanted).items()}
+            wanted = self.parts if full else tuple(parts)
+            state = self.curriculum.to_state([p for p in wanted if p != TRACES])
+            fields = {p: json.dumps(v) for p, v in state.items()}
             fields["summary"] = json.dumps(self.curriculum.summary())
             fields["updated_at"] = f"{time.time():.3f}"
             if "marginal" in wanted:
                 fields["grid"] = json.dumps(self.curriculum.marginal_grid(GRID_SIZE))
             pipe = self.redis.pipeline(transaction=True)
+            if self.skill:
+                self._write_skill(pipe, fields, full)
             pipe.hset(self.keys.curriculum, mapping=fields)
             if full and self.recent_ids:
                 pipe.sadd(self.keys.seen, *self.recent_ids)
@@ -90,17 +101,42 @@ class SamplerService:
             # (`ops` and the event were applied already)
             ops, event = None, None
 
+    def _write_skill(self, pipe, fields: dict, full: bool) -> None:
+        """[L21] extras of a transaction: elite traces (all of them on a full rewrite, else
+        what changed), and a density snapshot when due."""
+        added, removed = self.curriculum.drain_traces()
+        if full:
+            pipe.delete(self.keys.traces)
+            added = self.curriculum.traces
+        elif removed:
+            pipe.hdel(self.keys.traces, *removed)
+        if added:
+            pipe.hset(
+                self.keys.traces, mapping={k: json.dumps(v.tolist()) for k, v in added.items()}
+            )
+        now = time.monotonic()
+        if full or ((added or removed) and now - self.density_at > DENSITY_EVERY):
+            self.density_at = now
+            fields["density"] = json.dumps(self.curriculum.density_grid(GRID_SIZE))
+
     # --- the curriculum's calls ---------------------------------------------------------------
 
     def next_tasks(self, n: int, source: str = "") -> np.ndarray:
         """n task parameters for the episodes about to start: [n, d]."""
-        tasks = self.curriculum.next_tasks(int(n))
+        return self.next_deal(n, source)["tasks"]
+
+    def next_deal(self, n: int, source: str = "") -> dict:
+        """The tasks of the episodes about to start, [n, d], as a deal ([L21]: with the
+        motions m_a to imitate, the batch and its region)."""
+        deal = self.curriculum.next_deal(int(n))
         entry = json.dumps(
             {
                 "time": time.time(),
                 "source": source,
                 "names": list(self.curriculum.space.names),
-                "tasks": tasks.tolist(),
+                "tasks": deal["tasks"].tolist(),
+                "region": deal.get("region"),
+                "batch": deal.get("batch"),
             }
         )
 
@@ -109,7 +145,7 @@ class SamplerService:
             pipe.ltrim(self.keys.samples, 0, SAMPLES_LIMIT - 1)
 
         self._commit(("core",), record)
-        return tasks
+        return deal
 
     def ingest(self, episodes: list[dict]) -> int:
         """Count finished episodes once each (by `episode_id`); returns how many were new."""
@@ -124,7 +160,9 @@ class SamplerService:
         new_ids = [e["episode_id"] for e in new]
         self.curriculum.ingest(new)
         self.recent_ids.extend(new_ids)
-        self._commit(("core",), lambda pipe: pipe.sadd(self.keys.seen, *new_ids))
+        changed = self.skill and bool(self.curriculum.added or self.curriculum.removed)
+        parts = ("core", "elites") if changed else ("core",)
+        self._commit(parts, lambda pipe: pipe.sadd(self.keys.seen, *new_ids))
         return len(new)
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
@@ -132,6 +170,19 @@ class SamplerService:
         self.curriculum.update_marginal(layers, mu, iteration, refill)
         parts = ("core", "marginal", "buffer") if refill else ("core", "marginal")
         self._commit(parts)
+
+    def elite_data(self) -> tuple[np.ndarray, np.ndarray]:
+        """([L21]) The elites' parameters and traces: P_θ's training set."""
+        return self.curriculum.elite_data()
+
+    def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None:
+        """([L21]) The learner's P_θ, its version and loss, and the bootstrap stage."""
+        before = self.curriculum.stage
+        self.curriculum.update_motion(layers, version, loss, stage)
+        event = None
+        if stage != before:
+            event = ("stage_changed", f"bootstrap stage {before} -> {stage}")
+        self._commit(("core", "motion"), event=event)
 
     def set_k(self, k: float) -> None:
         old = self.curriculum.sampler.k
@@ -146,7 +197,8 @@ class SamplerService:
     def from_state(self, state: dict) -> None:
         """Replace the state (a run resumed from a checkpoint)."""
         self.curriculum.from_state(state)
-        self._commit(STATE_PARTS, event=("sampler_loaded", "sampler loaded a checkpoint's state"))
+        self.rewrite_all = True  # every part, traces included
+        self._commit(self.parts, event=("sampler_loaded", "sampler loaded a checkpoint's state"))
 
     def summary(self) -> dict:
         return self.curriculum.summary()
