@@ -41,6 +41,42 @@ def api_without_token(redis_server, tmp_path_factory):
     api.stop()
 
 
+SKILL_CFG = {
+    "name": "api-skill",
+    "character": "walker",
+    "task": {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]},
+    "env": {"clip": "planar_jump"},
+    "actors": {"num_envs": 4},
+    "curriculum": {"skill": {"sampling": "uniform", "batch_size": 8, "episodes_per_param": 1}},
+}
+
+
+@pytest.fixture(scope="module")
+def skill_run(redis_server, tmp_path_factory):
+    """An [L21] run: real SkillEnv episodes (tracking m0) ingested by the real sampler service."""
+    from paramimic.envs import make_env
+    from paramimic.rl.rollout import RolloutWorker
+
+    cfg = ExperimentConfig.model_validate(SKILL_CFG)
+    run_id = "api-skill-run"
+    RunReporter(redis_server.url, run_id).start(cfg, tmp_path_factory.mktemp("run"), 1000, None)
+    sampler = SamplerService(cfg.model_dump(mode="json"), redis_server.url, run_id)
+    probe = make_env(cfg.character, cfg.task, cfg.env)
+    worker = RolloutWorker(
+        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        4,
+        probe.observation_space.shape[0],
+        probe.action_space.shape[0],
+        (8,),
+        seed=0,
+        task_source=lambda n: sampler.next_deal(n, "test"),
+    )
+    fragment = worker.collect(250, use_policy=False)  # zero actions: m0's PD targets
+    sampler.ingest([e.to_dict() for e in fragment.episodes])
+    assert len(sampler.curriculum.elites) >= 3
+    return run_id
+
+
 @pytest.fixture(scope="module")
 def run(redis_server, tmp_path_factory):
     """A run as the learner and the sampler write it: 3 iterations, V̄, tasks, episodes."""
@@ -179,6 +215,43 @@ def test_changing_a_run_needs_the_token(api, api_without_token, run, redis_serve
     assert r.status_code == 403 and "disabled" in r.json()["detail"]
 
 
+def test_skill_endpoints(api, run, skill_run):
+    with httpx.Client(base_url=api) as c:
+        cur = c.get(f"/runs/{skill_run}/curriculum").json()
+        assert cur["mode"] == "uniform" and cur["phase"] == "uniform" and cur["stage"] == "base"
+        assert cur["elites"] >= 3 and cur["episodes"] >= cur["elites"]
+        assert cur["task_ranges"] == {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]}
+        every = c.get(f"/runs/{skill_run}/curriculum/elites").json()
+        assert every["names"] == ["gravity", "jump_height"]
+        assert len(every["items"]) == every["total"] == cur["elites"]
+        assert all(0.1 < e["fitness"] <= 1.1 for e in every["items"])
+        g = [e["params"]["gravity"] for e in every["items"]]
+        box = c.get(
+            f"/runs/{skill_run}/curriculum/elites", params={"low": "0.5,0", "high": "1.0,0.6"}
+        ).json()
+        assert len(box["items"]) == sum(x <= 1.0 for x in g)
+        near = c.get(
+            f"/runs/{skill_run}/curriculum/elites", params={"near": "1.0,0.1", "k": 2}
+        ).json()
+        assert len(near["items"]) == 2
+        d = [e["distance"] for e in near["items"]]
+        brute = sorted(
+            np.hypot(e["params"]["gravity"] - 1.0, (e["params"]["jump_height"] - 0.1) / 0.6)
+            for e in every["items"]
+        )
+        assert d == pytest.approx(brute[:2])
+        for bad in ({"near": "1.0"}, {"near": "a,b"}, {"low": "1,2,3"}, {"near": "nan,1"}):
+            r = c.get(f"/runs/{skill_run}/curriculum/elites", params=bad)
+            assert r.status_code == 422 and "comma-separated" in r.json()["detail"]
+        dens = c.get(f"/runs/{skill_run}/curriculum/density").json()
+        assert dens["available"] and dens["dims"] == ["gravity", "jump_height"]
+        assert len(dens["values"]) == 21 and max(map(max, dens["values"])) > 0.5
+        assert dens["visited"] == 0.8 and dens["surrounding"] == 0.2
+        for path in ("elites", "density"):  # a [WL19] run has neither
+            r = c.get(f"/runs/{run}/curriculum/{path}")
+            assert r.status_code == 404 and "no [L21] skill curriculum" in r.json()["detail"]
+
+
 def test_a_finished_run_cannot_be_paused(api, redis_server, tmp_path):
     cfg = ExperimentConfig.model_validate(CFG)
     reporter = RunReporter(redis_server.url, "finished-run")
@@ -188,12 +261,15 @@ def test_a_finished_run_cannot_be_paused(api, redis_server, tmp_path):
     assert r.status_code == 409 and "finished" in r.json()["detail"]
 
 
-@pytest.mark.parametrize("fixed_run", [True, False], ids=["known-run", "any-run"])
-def test_schemathesis_finds_no_server_error(api, run, tmp_path, fixed_run):
-    """Property-based requests over the whole OpenAPI schema, with the token: no 5xx. With
-    `known-run` every {run} is the seeded run, so the requests reach the endpoints' logic."""
+@pytest.mark.parametrize(
+    "fixed_run", ["wl19", "l21", None], ids=["known-run", "skill-run", "any-run"]
+)
+def test_schemathesis_finds_no_server_error(api, run, skill_run, tmp_path, fixed_run):
+    """Property-based requests over the whole OpenAPI schema, with the token: no 5xx. With a
+    known run every {run} is a seeded run, so the requests reach the endpoints' logic."""
     config = tmp_path / "schemathesis.toml"
-    config.write_text(f'[parameters]\nrun = "{run}"\n' if fixed_run else "")
+    known = {"wl19": run, "l21": skill_run}.get(fixed_run)
+    config.write_text(f'[parameters]\nrun = "{known}"\n' if known else "")
     exe = Path(sys.executable).parent / "schemathesis"
     res = subprocess.run(
         [
@@ -219,8 +295,16 @@ def test_schemathesis_finds_no_server_error(api, run, tmp_path, fixed_run):
         cwd=tmp_path,  # its cache goes there, not into the checkout
     )
     assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
-    if fixed_run:
+    if fixed_run == "l21":
         assert "Missing test data" not in res.stdout, res.stdout[-3000:]
+    elif fixed_run == "wl19":  # only the [L21] endpoints answer 404 for a [WL19] run
+        missing = {
+            line.strip() for line in res.stdout.splitlines() if line.strip().startswith("- ")
+        }
+        assert missing <= {
+            "- GET /runs/{run}/curriculum/elites",
+            "- GET /runs/{run}/curriculum/density",
+        }, res.stdout[-3000:]
 
 
 def test_the_api_imports_neither_torch_nor_mujoco_nor_ray():

@@ -29,7 +29,6 @@ from services.store import add_event, connect
 
 RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
 GRID_SIZE = 21  # points per display dimension of the V̄ and density snapshots
-DENSITY_EVERY = 2.0  # seconds between density snapshots while the elite set changes
 TRACES = "traces"  # the state part kept in its own hash (one field per elite), not as JSON
 
 
@@ -48,7 +47,6 @@ class SamplerService:
         self.keys = RunKeys(run_id)
         self.recent_ids: deque[str] = deque(maxlen=RECENT_IDS)
         self.rewrite_all = True
-        self.density_at = 0.0
         self.redis = connect(redis_url, retry_seconds, on_connect=self._reconnected)
         fields = [p for p in self.parts if p != TRACES]
         stored = self.redis.hmget(self.keys.curriculum, fields)
@@ -103,7 +101,7 @@ class SamplerService:
 
     def _write_skill(self, pipe, fields: dict, full: bool) -> None:
         """[L21] extras of a transaction: elite traces (all of them on a full rewrite, else
-        what changed), and a density snapshot when due."""
+        what changed), and a density snapshot when the elite set changed."""
         added, removed = self.curriculum.drain_traces()
         if full:
             pipe.delete(self.keys.traces)
@@ -114,9 +112,7 @@ class SamplerService:
             pipe.hset(
                 self.keys.traces, mapping={k: json.dumps(v.tolist()) for k, v in added.items()}
             )
-        now = time.monotonic()
-        if full or ((added or removed) and now - self.density_at > DENSITY_EVERY):
-            self.density_at = now
+        if full or added or removed:
             fields["density"] = json.dumps(self.curriculum.density_grid(GRID_SIZE))
 
     # --- the curriculum's calls ---------------------------------------------------------------

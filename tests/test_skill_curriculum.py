@@ -1,0 +1,161 @@
+"""The [L21] curriculum (SkillCurriculum) and bootstrap on scripted episodes: elites and traces,
+motions dealt per stage, batches, exploration rates and phase switches, state round trips."""
+
+import json
+
+import numpy as np
+import pytest
+
+from paramimic.config import CurriculumConfig, SkillCurriculumConfig
+from paramimic.curriculum.bootstrap import Bootstrap
+from paramimic.curriculum.density import SURROUNDING, VISITED
+from paramimic.curriculum.parameterization_net import ParameterizationNet
+from paramimic.curriculum.skill import SkillCurriculum
+from paramimic.curriculum.task_space import TaskSpace
+
+SPACE = TaskSpace.from_ranges({"gravity": (0.0, 1.0), "jump_height": (0.0, 1.0)})
+SHAPE = (4, 3)
+
+
+def make(**skill) -> SkillCurriculum:
+    cfg = CurriculumConfig(skill=SkillCurriculumConfig(**skill), chains=8, burn_in=10)
+    return SkillCurriculum(SPACE, cfg, seed=0, reference=np.array([0.5, 0.5]), trace_shape=SHAPE)
+
+
+def episode(i, achieved, fitness, batch=None, trace_value=None):
+    trace = None if trace_value is None else np.full(SHAPE, trace_value).tolist()
+    return {
+        "episode_id": f"e{i}",
+        "task": list(achieved),
+        "return": 1.0,
+        "length": 10,
+        "fell": False,
+        "diverged": False,
+        "achieved": list(achieved),
+        "fitness": fitness,
+        "trace": trace,
+        "batch": batch,
+    }
+
+
+def test_elites_keep_their_traces_and_replace_worse_neighbours():
+    c = make()
+    c.ingest([episode(0, (0.5, 0.5), 0.6, trace_value=1.0)])
+    c.ingest([episode(1, (0.52, 0.5), 0.5, trace_value=2.0)])  # worse neighbour: dismissed
+    c.ingest([episode(2, (0.9, 0.9), 0.05, trace_value=3.0)])  # below the threshold 0.1
+    c.ingest([episode(3, (0.9, 0.9), 0.4, trace_value=None)])  # no trace (did not finish)
+    assert set(c.traces) == {"e0"}
+    c.ingest([episode(4, (0.51, 0.5), 0.7, trace_value=4.0)])  # better: replaces e0
+    assert set(c.traces) == {"e4"}
+    added, removed = c.drain_traces()
+    assert set(added) == {"e4"} and removed == {"e0"}
+    assert c.drain_traces() == ({}, set())
+    params, traces = c.elite_data()
+    assert params.tolist() == [[0.51, 0.5]] and traces.shape == (1, *SHAPE)
+    assert c.stats["episodes"] == 5
+
+
+def test_motions_follow_the_bootstrap_stage():
+    c = make(batch_size=4, episodes_per_param=1)
+    deal = c.next_deal(3)
+    assert deal["region"] == "reference" and deal["motions"] is None
+    assert deal["tasks"].tolist() == [[0.5, 0.5]] * 3  # π0 trains at a0 on m0
+    c.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0)])
+    c.ingest([episode(1, (0.8, 0.5), 0.9, trace_value=3.0)])
+    c.update_motion(None, 0, None, "proxy")
+    deal = c.next_deal(4)
+    # kNN proxy (Eq. 14) between the two elites: a convex mix of 1.0 and 3.0
+    assert deal["motions"].shape == (4, *SHAPE)
+    assert np.all((deal["motions"] >= 1.0) & (deal["motions"] <= 3.0))
+    net = ParameterizationNet(SPACE, SHAPE, hidden=(8,), seed=0)
+    net.fit(*c.elite_data(), steps=5)
+    with pytest.raises(ValueError, match="stage must be"):
+        c.update_motion(net.layers(), net.version, net.mse, "final")
+    c.update_motion(net.layers(), net.version, net.mse, "mixed")
+    tasks = SPACE.sample(np.random.default_rng(0), 200)
+    motions = c.motions_for(tasks)
+    from_net = np.all(np.isclose(motions, net.predict(tasks), atol=1e-5), axis=(1, 2))
+    assert 0.3 < from_net.mean() < 0.7  # a random choice between P_θ and the proxy
+    assert c.summary()["motion_version"] == 1 and c.summary()["stage"] == "mixed"
+
+
+def test_batches_measure_exploration_rates_and_switch_phases():
+    c = make(batch_size=5, episodes_per_param=2, probe_every=2)
+    # a populated centre: A_h around (0.5, 0.5), A_s on a ring around it
+    for i, g in enumerate(np.linspace(0.4, 0.6, 6)):
+        c.ingest([episode(100 + i, (g, 0.5), 0.5, trace_value=0.0)])
+    c.update_motion(None, 0, None, "proxy")
+    deal = c.next_deal(10)  # batch 1: exploration draws from A_s
+    assert deal["region"] == SURROUNDING
+    rho = c.density(deal["tasks"])
+    assert np.all((rho >= 0.2) & (rho < 0.8))
+    # its 10 episodes find new elites far apart: the exploration rate in A_s is 1
+    eps = [episode(i, (0.105 * i, 0.95), 0.9, deal["batch"], 1.0) for i in range(10)]
+    c.ingest(eps)
+    assert c.phase.rate_surrounding == pytest.approx(1.0)
+    deal = c.next_deal(10)  # batch 2: the occasional probe of A_h
+    assert deal["region"] == VISITED
+    assert np.all(c.density(deal["tasks"]) >= 0.8)
+    # nothing improves there: rate 0 in A_h; A_s (1.0) > A_h (0.0): exploration goes on
+    c.ingest([episode(20 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    assert c.phase.rate_visited == 0.0 and c.phase.phase == "exploration"
+    deal = c.next_deal(10)  # batch 3: A_s again, now without improvements
+    c.ingest([episode(40 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    deal = c.next_deal(10)  # batch 4: the probe of A_h finds improvements (EMA 0.5 each)
+    assert deal["region"] == VISITED
+    eps = [episode(60 + i, (0.105 * i, 0.05), 0.95, deal["batch"], 1.0) for i in range(10)]
+    c.ingest(eps)
+    assert c.phase.rate_visited == c.phase.rate_surrounding == 0.5
+    assert c.phase.phase == "exploration"
+    deal = c.next_deal(10)  # batch 5: A_s without improvements: 0.25 < 0.5, refinement
+    assert deal["region"] == SURROUNDING
+    c.ingest([episode(80 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    assert c.phase.phase == "refinement" and c.phase.switches == 1
+    deal = c.next_deal(10)  # batch 6: in refinement the occasional probe is of A_s
+    assert deal["region"] == SURROUNDING
+    c.ingest([episode(90 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    assert c.next_deal(1)["region"] == VISITED  # batch 7: refinement draws from A_h
+    s = c.summary()
+    assert s["phase"] == "refinement" and s["explored_ratio"] > 0
+    assert [h["episodes"] for h in s["history"]] == [16, 26, 36, 46, 56, 66]
+
+
+def test_uniform_sampling_is_the_baseline():
+    c = make(sampling="uniform", batch_size=50, episodes_per_param=1)
+    tasks = c.next_deal(50)["tasks"]
+    assert c.summary()["phase"] == "uniform"
+    assert tasks.min(axis=0) == pytest.approx([0, 0], abs=0.1)
+    assert tasks.max(axis=0) == pytest.approx([1, 1], abs=0.1)
+
+
+def test_state_round_trip_continues_exactly():
+    c = make(batch_size=3, episodes_per_param=1)
+    for i in range(8):
+        c.ingest([episode(i, (0.1 * i, 0.5), 0.5 + 0.01 * i, trace_value=float(i))])
+    c.update_motion(None, 0, None, "proxy")
+    c.next_deal(2)
+    state = json.loads(json.dumps(c.to_state()))
+    twin = make(batch_size=3, episodes_per_param=1)
+    twin.from_state(state)
+    assert json.dumps(twin.to_state(), sort_keys=True) == json.dumps(state, sort_keys=True)
+    assert np.array_equal(twin.next_deal(5)["tasks"], c.next_deal(5)["tasks"])
+    assert np.allclose(twin.next_deal(2)["motions"], c.next_deal(2)["motions"])
+
+
+def test_bootstrap_stages():
+    cfg = SkillCurriculumConfig(
+        base_min_iterations=4, base_max_iterations=50, plateau_window=3, p_loss_threshold=0.01
+    )
+    b = Bootstrap(cfg)
+    for it, ret in enumerate([1, 2, 3, 4, 5, 6, 7]):  # still improving
+        assert b.observe(it, ret, None) == "base"
+    for it, ret in enumerate([7.0, 7.05, 7.0, 7.02, 7.01, 7.0], start=7):
+        stage = b.observe(it, ret, None)
+    assert stage == "proxy" and b.switched_at["proxy"] == 11
+    assert b.observe(13, 1.0, 0.5) == "proxy"  # P_θ's loss is still above the threshold
+    assert b.observe(14, 1.0, 0.005) == "mixed"
+    capped = Bootstrap(SkillCurriculumConfig(base_min_iterations=1, base_max_iterations=3))
+    assert [capped.observe(i, float(i), None) for i in range(3)] == ["base", "base", "proxy"]
+    twin = Bootstrap(cfg)
+    twin.from_state(json.loads(json.dumps(b.to_state())))
+    assert twin.to_state() == b.to_state()

@@ -1,0 +1,170 @@
+"""SkillEnv: continuous-time imitation ([L21] §4), the traces, hindsight and fitness it reports."""
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+from paramimic.config import EnvConfig, SkillConfig
+from paramimic.envs import make_env
+from paramimic.envs.skill_env import SkillEnv
+
+TASK = {"gravity": (0.2, 1.65), "jump_height": (0.0, 0.6)}
+
+
+@pytest.fixture
+def env():
+    return SkillEnv("walker", TASK, EnvConfig(clip="planar_jump"))
+
+
+def _run(env, action_fn, options=None, seed=0):
+    obs, _ = env.reset(seed=seed, options=options)
+    rows = []
+    while True:
+        a = action_fn(len(rows))
+        obs, r, te, tr, info = env.step(a)
+        rows.append((r, te, tr, info))
+        if te or tr:
+            return rows
+
+
+def test_spaces_and_make_env(env):
+    assert isinstance(make_env("walker", TASK, EnvConfig(clip="planar_jump")), SkillEnv)
+    assert env.action_space.shape == (env.nj + 1,)  # (d_t, τ_t)
+    assert env.trace_shape == (16, env.root_nv + env.nj + 1)
+    obs, info = env.reset(seed=1, options={"task": {"gravity": 1.0, "jump_height": 0.2}})
+    assert env.observation_space.contains(obs)
+    assert info["task"] == pytest.approx([1.0, 0.2])
+    with pytest.raises(ValueError, match="not inside the task space"):
+        env.reset(options={"task": [3.0, 0.2]})
+    with pytest.raises(ValueError, match="motion trace must have shape"):
+        env.reset(options={"task": [1.0, 0.2], "motion": np.zeros((3, 3))})
+    with pytest.raises(ValueError, match="needs env.clip"):
+        SkillEnv("walker", TASK, EnvConfig())
+
+
+def test_reference_time_advances_by_exp_tau_and_pd_target_is_displaced_m0(env):
+    env.reset(seed=0, options={"task": [1.0, 0.14]})
+    c = env.character
+    a = np.zeros(env.nj + 1)
+    a[env.nj] = np.log(2.0)  # τ = ln 2: the reference advances 2 control steps per step
+    a[0] = 0.2  # a hip displacement of 0.2 * action_scale
+    phi_before = env._phi
+    _, _, _, _, info = env.step(a)
+    assert info["dphi"] == pytest.approx(2.0)
+    assert env._phi == pytest.approx(phi_before + 2.0)
+    target = env._at(env._q0, env._phi)[c.qpos_idx]
+    target[0] += 0.2 * env.config.action_scale
+    assert env.data.ctrl == pytest.approx(np.clip(target, c.ctrl_low, c.ctrl_high))
+    _, _, _, _, info = env.step(np.zeros(env.nj + 1))
+    assert info["dphi"] == pytest.approx(1.0)
+
+
+def test_time_reward_compares_with_the_motion_time_warp(env):
+    trace = np.zeros(env.trace_shape)
+    trace[:, -1] = np.log(2.0)  # m_a runs twice as fast as m0
+    env.reset(seed=0, options={"task": [1.0, 0.14], "motion": trace})
+    a = np.zeros(env.nj + 1)
+    _, _, _, _, info = env.step(a)  # Δφ = 1 against τ̂ = ln 2: exp(−(1 − 2)² / 0.1²) ≈ 0
+    assert info["reward_terms"]["time"] == pytest.approx(np.exp(-1 / 0.01))
+    a[env.nj] = np.log(2.0)
+    _, _, _, _, info = env.step(a)
+    assert info["reward_terms"]["time"] == pytest.approx(1.0)
+
+
+def test_a_completed_episode_reports_trace_hindsight_fitness_and_the_spike(env):
+    rng = np.random.default_rng(0)
+    d = rng.uniform(-0.1, 0.1, env.nj)
+    tau = 0.05
+
+    def act(t):
+        return np.concatenate([d / env.config.action_scale, [tau]])
+
+    rows = _run(env, act, {"task": [1.0, 0.3]})
+    r, te, tr, info = rows[-1]
+    assert te and not tr and not info["fell"]
+    assert len(rows) == pytest.approx(env.length / np.exp(tau), abs=1.5)
+    skill = info["skill"]
+    assert skill["completed"] and 0.1 < skill["fitness"] <= 1.0 + 0.1
+    trace = skill["trace"]
+    assert trace.shape == env.trace_shape
+    assert trace[:, env.root_nv : env.root_nv + env.nj] == pytest.approx(np.tile(d, (16, 1)))
+    assert trace[:, -1] == pytest.approx(tau)
+    # hindsight: a' keeps gravity and takes the jump height the episode reached
+    assert skill["achieved"][0] == 1.0
+    assert skill["achieved"][1] == pytest.approx(np.clip(env.jump_height(), 0.0, 0.6))
+    # Eq. 8 spike with w_task = 10 when the clip ends, nothing before
+    expected = 10.0 * np.exp(-((env.jump_height() - 0.3) ** 2) / 0.1**2)
+    assert info["reward_spike"] == pytest.approx(expected)
+    assert all(row[3]["reward_spike"] == 0.0 for row in rows[:-1])
+    assert all(0.0 <= row[0] <= 1.0 for row in rows[:-1])  # continuous tracking, w = 1
+
+
+def test_tracking_m0_scores_higher_fitness_than_flailing(env):
+    rng = np.random.default_rng(1)
+    calm = _run(env, lambda t: np.zeros(env.nj + 1), {"task": [1.0, 0.14]})[-1][3]["skill"]
+    wild = []
+    for seed in range(3):
+        rows = _run(
+            env, lambda t: np.append(rng.uniform(-1, 1, env.nj), 0.0), {"task": [1.0, 0.14]}, seed
+        )
+        wild.append(rows[-1][3]["skill"]["fitness"])
+    assert calm["fitness"] > 0.5
+    assert max(wild) < calm["fitness"]
+
+
+def test_gravity_is_per_env_and_changes_the_flight(env):
+    other = SkillEnv("walker", TASK, EnvConfig(clip="planar_jump"))
+    env.reset(seed=0, options={"task": [0.2, 0.14]})
+    other.reset(seed=0, options={"task": [1.0, 0.14]})
+    assert env.model.opt.gravity[2] == pytest.approx(-0.2 * 9.81)
+    assert other.model.opt.gravity[2] == pytest.approx(-9.81)
+    heights = []
+    for g in (1.0, 0.5):
+        _run(env, lambda t: np.zeros(env.nj + 1), {"task": [g, 0.14]})
+        heights.append(env.jump_height())
+    assert heights[1] > heights[0]  # the same take-off flies higher on a lighter planet
+
+
+def test_divergence_and_falls_end_the_episode(env):
+    env.reset(seed=0, options={"task": [1.0, 0.14]})
+    env.data.qvel[:] = 1e5
+    _, r, te, _, info = env.step(np.zeros(env.nj + 1))
+    assert te and info["diverged"] and r == 0.0
+    assert info["skill"]["fitness"] == 0.0 and info["skill"]["trace"] is None
+    rows = _run(env, lambda t: np.append(np.full(env.nj, -1.0), 0.0), {"task": [1.0, 0.14]})
+    assert rows[-1][3]["fell"] and rows[-1][1]
+    assert rows[-1][3]["skill"]["fitness"] == 0.0
+
+
+def test_humanoid_servos_hold_the_first_frame_of_the_jump():
+    """Stable PD on the hinge triples holds the clip's pose: no collapse while the open-loop
+    hold lasts (without balance feedback a 3D body tips over after about a second)."""
+    env = SkillEnv(
+        "humanoid", {"gravity": (1.0, 1.0)}, EnvConfig(clip="humanoid_jump", init_noise=0.0)
+    )
+    trace = np.zeros(env.trace_shape)
+    trace[:, -1] = -3.0  # τ̂ = −3: m_a barely moves from its first frame
+    env.reset(seed=0, options={"motion": trace})
+    a = np.zeros(env.nj + 1)
+    a[env.nj] = -3.0 / env.skill.tau_scale
+    root = env.character.root_body_id
+    height = env.data.xpos[root, 2]
+    for _ in range(10):  # 1/3 s of PD hold
+        _, _, te, _, info = env.step(a)
+        assert not te
+    assert env.data.xpos[root, 2] == pytest.approx(height, abs=0.03)
+    tracking = env.data.qpos[env.character.qpos_idx] - env.data.ctrl
+    assert np.abs(tracking).max() < 0.15
+    mujoco.mj_kinematics(env.model, env.data)
+    assert env.data.site_xpos[env.character.contact_site_ids, 2].min() < 0.02
+
+
+def test_checks_the_gymnasium_api(env):
+    from gymnasium.utils.env_checker import check_env
+
+    check_env(env, skip_render_check=True)
+    assert isinstance(env, gym.Env)
+    assert SkillConfig().w_q + SkillConfig().w_ee + SkillConfig().w_com + SkillConfig().w_time == (
+        pytest.approx(1.0)
+    )
