@@ -133,8 +133,12 @@ def status(
                 "steps_per_second", "mean_return", "fall_percent"):  # fmt: skip
         table.add_row(key, _fmt(progress.get(key)))
     if curriculum:
-        for key in ("mode", "k", "mu", "refills", "buffer_adaptive", "buffer_size",
-                    "episodes", "tasks_served", "phase", "explored_ratio", "paused"):  # fmt: skip
+        keys = ["mode", "k", "mu", "refills", "buffer_adaptive", "buffer_size", "episodes",
+                "tasks_served", "phase", "explored_ratio", "paused"]  # fmt: skip
+        if curriculum.get("stage") is not None:  # [L21]
+            keys += ["stage", "elites", "elite_mean_fitness", "exploration_rate_surrounding",
+                     "exploration_rate_visited", "phase_switches", "motion_version"]  # fmt: skip
+        for key in keys:
             table.add_row(f"curriculum.{key}", _fmt(curriculum.get(key)))
         table.add_row("curriculum.buffer_mean", _fmt(curriculum["buffer_mean"]))
     console.print(table)

@@ -414,6 +414,12 @@ class SkillEnv(gym.Env):
             ],
             1,
         )
+        # Eq. 10: a zero-range parameter is a constraint the episode should meet
+        r_constraint = 0.0
+        h = self._height_idx
+        if h is not None and self.task_space.width[h] == 0:
+            err = self.jump_height() - self._task[h]
+            r_constraint = float(np.exp(-(err**2) / self.skill.sigma_task**2))
         f = fitness(
             EpisodeTrace(
                 pose_error=np.abs(np.asarray(rec["pose"])),
@@ -423,7 +429,8 @@ class SkillEnv(gym.Env):
                 ee_height_ref=ee0,
                 contact_ref=c0,
                 ee_slide=np.asarray(rec["slide"]),
-            )
+            ),
+            r_constraint,
         )
         return {"achieved": achieved, "fitness": f, "trace": trace, "completed": True}
 

@@ -54,7 +54,7 @@ class SamplerService:
             state = {p: json.loads(v) for p, v in zip(fields, stored, strict=True)}
             if self.skill:
                 traces = self.redis.hgetall(self.keys.traces)
-                state[TRACES] = {k.decode(): json.loads(v) for k, v in traces.items()}
+                state[TRACES] = {k: json.loads(v) for k, v in traces.items()}
             self.curriculum.from_state(state)
             kind = "sampler_restarted" if restarted else "sampler_started"
             self._commit(self.parts, event=(kind, "sampler reloaded its state from Redis"))

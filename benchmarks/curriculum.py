@@ -1,0 +1,156 @@
+"""[L21] Fig. 8 at laptop scale: explored ratio ER against episodes N for the exploration/
+refinement curriculum and for uniform random task sampling at the same episode budget, on
+configs/walker_jump.yaml. Everything but `curriculum.skill.sampling` is the same (the bootstrap
+with π0, hindsight elites, P_θ); ER is measured the same way for both (share of the task box
+whose elite density is at least D = 0.8, on 2,048 fixed probe points).
+
+    pip install -e ".[bench]"
+    python benchmarks/curriculum.py [--steps 400000] [--seeds 0] [--config configs/walker_jump.yaml]
+
+Writes benchmarks/results/curriculum.json (per run: N, ER, elites, phase per iteration; the ER
+of each run at common N; the ratio curriculum / uniform) and benchmarks/results/curriculum.png.
+Runs in-process (the serial backend), one run after the other.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+sys.path.insert(0, str(ROOT))
+
+
+def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dict:
+    import torch
+
+    from paramimic.config import load_config
+    from services.learner.trainer import SerialBackend, Trainer
+
+    cfg = load_config(
+        ROOT / config,
+        {
+            "curriculum.skill.sampling": sampling,
+            "train.seed": seed,
+            "train.run_dir": str(run_dir),
+            "train.checkpoint_every": 1_000_000,
+        },
+    )
+    torch.manual_seed(seed)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    trainer = Trainer(cfg, run_dir)
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    curve = []
+    t0 = time.perf_counter()
+
+    def record(m: dict) -> None:
+        c = trainer.curriculum
+        s = c.summary()
+        curve.append(
+            {
+                "iteration": m["iteration"],
+                "env_steps": m["env_steps"],
+                "episodes": int(c.stats["episodes"]),
+                "explored_ratio": c.explored_ratio(),
+                "elites": s["elites"],
+                "phase": s["phase"],
+                "stage": s["stage"],
+                "mean_return": m.get("mean_return"),
+                "fall_percent": m.get("fall_percent"),
+                "elite_mean_fitness": s["elite_mean_fitness"],
+            }
+        )
+        last = curve[-1]
+        print(
+            f"{sampling:10s} s{seed} it {last['iteration']:4d} N {last['episodes']:6d} "
+            f"ER {last['explored_ratio']:.3f} elites {last['elites']:4d} {last['phase']}",
+            flush=True,
+        )
+
+    trainer.train(backend, steps, on_metrics=record)
+    return {
+        "sampling": sampling,
+        "seed": seed,
+        "steps": steps,
+        "seconds": time.perf_counter() - t0,
+        "phase_switches": trainer.curriculum.phase.switches,
+        "curve": curve,
+    }
+
+
+def compare(runs: list[dict]) -> dict:
+    """ER at common episode counts (linear interpolation), per mode averaged over seeds."""
+    n_max = min(r["curve"][-1]["episodes"] for r in runs)
+    grid = np.linspace(0, n_max, 21)[1:]
+    per_mode: dict[str, list[np.ndarray]] = {}
+    for r in runs:
+        n = [p["episodes"] for p in r["curve"]]
+        er = [p["explored_ratio"] for p in r["curve"]]
+        per_mode.setdefault(r["sampling"], []).append(np.interp(grid, n, er))
+    mean = {k: np.mean(v, axis=0) for k, v in per_mode.items()}
+    out = {"episodes": grid.tolist(), "explored_ratio": {k: v.tolist() for k, v in mean.items()}}
+    if {"curriculum", "uniform"} <= set(mean):
+        c, u = mean["curriculum"], mean["uniform"]
+        out["final_ratio"] = float(c[-1] / u[-1]) if u[-1] > 0 else None
+        out["area_ratio"] = float(c.sum() / u.sum()) if u.sum() > 0 else None
+        out["target"] = "ER(curriculum) >= 1.5 x ER(uniform) at equal episodes"
+        out["target_met"] = out["final_ratio"] is not None and out["final_ratio"] >= 1.5
+    return out
+
+
+def plot(runs: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    colors = {"curriculum": "tab:red", "uniform": "tab:blue"}
+    for r in runs:
+        n = [p["episodes"] for p in r["curve"]]
+        er = [p["explored_ratio"] for p in r["curve"]]
+        ax.plot(n, er, color=colors[r["sampling"]], label=f"{r['sampling']} (seed {r['seed']})")
+    ax.set_xlabel("episodes N")
+    ax.set_ylabel("explored ratio ER")
+    ax.set_title("walker_jump: curriculum vs uniform sampling ([L21] Fig. 8)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--config", default="configs/walker_jump.yaml")
+    p.add_argument("--steps", type=int, default=400_000)
+    p.add_argument("--seeds", default="0")
+    p.add_argument("--out", default=str(RESULTS / "curriculum.json"))
+    args = p.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    runs = []
+    for seed in seeds:
+        for sampling in ("curriculum", "uniform"):
+            run_dir = ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}"
+            runs.append(run(args.config, sampling, args.steps, seed, run_dir))
+    result = {
+        "config": args.config,
+        "steps": args.steps,
+        "seeds": seeds,
+        "comparison": compare(runs),
+        "runs": runs,
+        "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:]),
+    }
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1))
+    plot(runs, out.with_suffix(".png"))
+    print(json.dumps(result["comparison"], indent=1))
+
+
+if __name__ == "__main__":
+    main()
