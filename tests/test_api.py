@@ -61,6 +61,7 @@ def skill_run(redis_server, tmp_path_factory):
     run_id = "api-skill-run"
     RunReporter(redis_server.url, run_id).start(cfg, tmp_path_factory.mktemp("run"), 1000, None)
     sampler = SamplerService(cfg.model_dump(mode="json"), redis_server.url, run_id)
+    sampler.update_motion(None, 0, None, "proxy")  # past π0: tasks uniform over the box
     probe = make_env(cfg.character, cfg.task, cfg.env)
     worker = RolloutWorker(
         lambda: make_env(cfg.character, cfg.task, cfg.env),
@@ -218,7 +219,7 @@ def test_changing_a_run_needs_the_token(api, api_without_token, run, redis_serve
 def test_skill_endpoints(api, run, skill_run):
     with httpx.Client(base_url=api) as c:
         cur = c.get(f"/runs/{skill_run}/curriculum").json()
-        assert cur["mode"] == "uniform" and cur["phase"] == "uniform" and cur["stage"] == "base"
+        assert cur["mode"] == "uniform" and cur["phase"] == "uniform" and cur["stage"] == "proxy"
         assert cur["elites"] >= 3 and cur["episodes"] >= cur["elites"]
         assert cur["task_ranges"] == {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]}
         every = c.get(f"/runs/{skill_run}/curriculum/elites").json()

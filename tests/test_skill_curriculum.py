@@ -122,6 +122,9 @@ def test_batches_measure_exploration_rates_and_switch_phases():
 
 def test_uniform_sampling_is_the_baseline():
     c = make(sampling="uniform", batch_size=50, episodes_per_param=1)
+    assert c.next_deal(50)["region"] == "reference"  # π0 first, as in the curriculum
+    c.ingest([episode(i, (0.5, 0.5), 0.5, 1, 1.0) for i in range(50)])
+    c.update_motion(None, 0, None, "proxy")
     tasks = c.next_deal(50)["tasks"]
     assert c.summary()["phase"] == "uniform"
     assert tasks.min(axis=0) == pytest.approx([0, 0], abs=0.1)

@@ -149,10 +149,11 @@ class SkillCurriculum(AdaptiveCurriculum):
     def _new_batch(self) -> None:
         sc, rng, B = self.sc, self.rng, self.sc.batch_size
         self.batch_count += 1
-        if sc.sampling == "uniform":
-            params, region = self.space.sample(rng, B), "uniform"
-        elif self.stage == "base" or len(self.elites) == 0:
+        if self.stage == "base" or (sc.sampling == "curriculum" and len(self.elites) == 0):
+            # π0 learns m0 at a0 first, whatever samples the tasks afterwards (§5.3)
             params, region = np.tile(self.reference, (B, 1)), "reference"
+        elif sc.sampling == "uniform":
+            params, region = self.space.sample(rng, B), "uniform"
         else:
             region = SURROUNDING if self.phase.phase == "exploration" else VISITED
             if self.batch_count % sc.probe_every == 0:  # §6.3: occasional samples elsewhere
