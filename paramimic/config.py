@@ -21,6 +21,8 @@ TASK_GOALS = {
     "gravity": "gravity as a multiple of 9.81 m/s² (skill env)",
     "jump_height": "peak rise of the COM above its standing height (m, skill env)",
 }
+# Characters with a procedural [WL19] gait (ParamEnv); the others imitate clips (SkillEnv)
+PLANAR_GAITS = ("walker", "hopper")
 # Reference clips of the skill env, by name -> the characters they fit
 CLIPS = {"planar_jump": ("walker", "hopper"), "humanoid_jump": ("humanoid",)}
 CLIPS |= {f"humanoid_{n}": ("humanoid",) for n in ("walk", "run", "backflip", "cartwheel")}
@@ -269,6 +271,11 @@ class ExperimentConfig(Section):
             raise ValueError(
                 f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
                 + ", ".join(f"{k} ({'/'.join(v)})" for k, v in CLIPS.items())
+            )
+        if clip is None and self.character not in PLANAR_GAITS:
+            raise ValueError(
+                f"character {self.character!r} has no [WL19] gait; set env.clip "
+                f"(one of {sorted(k for k, v in CLIPS.items() if self.character in v)})"
             )
         skill_only = {"gravity", "jump_height"} & set(self.task)
         if clip is None and skill_only:

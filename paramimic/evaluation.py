@@ -26,6 +26,7 @@ class EpisodeResult:
     fell: bool
     distance: float  # root x travelled (m)
     seconds: float
+    fitness: float | None = None  # [L21] Eq. 10 of a skill episode (0 unless completed)
 
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
@@ -76,9 +77,10 @@ def run_episodes(
                     s["ret"],
                     s["task"],
                     s["len"],
-                    bool(te),
+                    bool(info["fell"] or info["diverged"]),  # a completed clip also terminates
                     float(env.data.qpos[0]) - s["x0"],
                     s["len"] * env.dt,
+                    info["skill"]["fitness"] if "skill" in info else None,
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -107,7 +109,12 @@ def summarize(results: list[EpisodeResult]) -> dict:
         "mean_length_seconds": float(np.mean([r.seconds for r in results])),
         "mean_forward_speed": float(speeds.mean()),
         "uniformity": uniformity(rets),
-    }
+    } | _fitness(results)
+
+
+def _fitness(results: list[EpisodeResult]) -> dict:
+    f = [r.fitness for r in results if r.fitness is not None]
+    return {"mean_fitness": float(np.mean(f))} if f else {}
 
 
 def evaluate(

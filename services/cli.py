@@ -214,8 +214,10 @@ def evaluate_cmd(
         "task_achievement",
         "fall_percent",
         "mean_forward_speed",
+        "mean_fitness",  # [L21] skill runs
     )
-    console.print({k: round(report[k], 3) for k in keys} | {"uniformity": report["uniformity"]})
+    shown = {k: round(report[k], 3) for k in keys if k in report}
+    console.print(shown | {"uniformity": report["uniformity"]})
 
 
 if __name__ == "__main__":

@@ -58,6 +58,40 @@ def test_train_then_eval_writes_json(tmp_path):
     assert json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])["iteration"] == 3
 
 
+SKILL = {
+    "character": "walker",
+    "task": {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]},
+    "env": {"clip": "planar_jump"},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2},
+    "curriculum": {"skill": {"batch_size": 4, "episodes_per_param": 2, "p_every": 1,
+                             "base_min_iterations": 1, "base_max_iterations": 1}},
+    "actors": {"num_envs": 4},
+    "train": {"total_steps": 768, "checkpoint_every": 1},
+}  # fmt: skip
+
+
+def test_skill_run_trains_resumes_and_evaluates(tmp_path):
+    """An [L21] run in one process: the bootstrap stage, P_θ and the elites survive --resume."""
+    cfg = tmp_path / "skill.yaml"
+    cfg.write_text(yaml.safe_dump(SKILL))
+    run = tmp_path / "run"
+    res = _cli("train", cfg, "--serial", "--run-dir", run)
+    assert res.returncode == 0, res.stdout + res.stderr
+    lines = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    assert [m["stage"] for m in lines] == ["proxy", "proxy", "proxy"]
+    res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume", "--total-steps", 1024)
+    assert res.returncode == 0, res.stdout + res.stderr
+    last = json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])
+    assert last["iteration"] == 4 and last["stage"] in ("proxy", "mixed")  # not back to base
+    assert last["motion_version"] >= lines[-1]["motion_version"]
+    out = tmp_path / "eval.json"
+    res = _cli("eval", run, "--episodes", 4, "--grid", 2, "--seed", 1, "--out", out)
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads(out.read_text())
+    assert 0.0 <= report["mean_fitness"] <= 1.1 and 0 <= report["fall_percent"] <= 100
+    assert report["grid"]["dims"] == ["gravity", "jump_height"]
+
+
 def test_bad_config_fails_before_anything_starts(tmp_path):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(yaml.safe_dump({**TINY, "ppo": {"policy_lr": -1}}))

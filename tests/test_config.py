@@ -29,6 +29,27 @@ def _write(tmp_path, text):
         ("task: {arm_length: [0.8, 1.2]}", "task.arm_length", "not a parameter of 'walker'"),
         ("curriculum: {k: -1}", "curriculum.k", "greater than or equal to 0"),
         ("name: my run", "name", "should match pattern"),  # it starts the Redis run id
+        # [L21] skill configs
+        ("character: humanoid", "(config)", "no [WL19] gait; set env.clip"),
+        ("env: {clip: humanoid_jump}", "(config)", "does not fit character 'walker'"),
+        ("task: {gravity: [0.5, 1.5]}", "(config)", "task.gravity needs env.clip"),
+        (
+            "env: {clip: planar_jump}\ntask: {target_velocity: [1, 1]}",
+            "(config)",
+            "[WL19] gait goal",
+        ),
+        (
+            "env: {clip: planar_jump}\ntask: {gravity: [0.5, 1.5]}\n"
+            "curriculum: {skill: {reference: {gravity: 2.0}}}",
+            "(config)",
+            "outside [0.5, 1.5]",
+        ),
+        (
+            "curriculum: {skill: {density_visited: 0.1}}",
+            "curriculum.skill",
+            "must be below density_visited",
+        ),
+        ("env: {skill: {trace_bins: 1}}", "env.skill.trace_bins", "greater than or equal to 2"),
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):

@@ -81,14 +81,16 @@ class SkillEnv(gym.Env):
         self._height_idx = names.index("jump_height") if "jump_height" in names else None
         self.clip = reference_clip(self.config.clip, self.definition)
         self.frame_skip = self.config.frame_skip
+        base = _compiled(self.definition.name, ())
+        self.nj = len(base.qpos_idx)
+        self.root_nq = base.model.nq - self.nj  # 3 (planar x, z, pitch) or 7 (free joint)
+        self.root_nv = base.model.nv - self.nj
+        self._base_hip_height = base.hip_height
         self.character: Character | None = None
         self._load(self.task_space.center)
         self.dt = self.model.opt.timestep * self.frame_skip
         # reference grid: one row per control step of reference time, φ = 0..n_ref-1
         self.length = self.clip.duration / self.dt  # φ at which the clip ends
-        self.nj = len(self.character.qpos_idx)
-        self.root_nq = self.model.nq - self.nj
-        self.root_nv = self.model.nv - self.nj
         self.trace_dim = self.root_nv + self.nj + 1  # (d_root, d_joints, τ) per bin
         self.trace_shape = (self.skill.trace_bins, self.trace_dim)
         self._bins = (np.arange(self.skill.trace_bins) + 0.5) * self.length / self.skill.trace_bins
@@ -121,9 +123,8 @@ class SkillEnv(gym.Env):
         dt = self.model.opt.timestep * self.frame_skip
         phis = np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt
         pose = self.clip.sample(phis)
-        if self.root_nq_of(c) == 3:  # planar: the clip is for the base body; keep feet down
-            base = _compiled(self.definition.name, ())
-            pose.root_position[:, 2] += c.hip_height - base.hip_height
+        if self.root_nq == self.root_nv:  # planar: the clip is for the base body; feet down
+            pose.root_position[:, 2] += c.hip_height - self._base_hip_height
         self._q0 = self.definition.pose_qpos(c, pose)  # m0 on the grid [n_ref, nq]
         ee0, com0, low0 = self._kinematics(self._q0)
         self._feet = np.array(
@@ -133,10 +134,6 @@ class SkillEnv(gym.Env):
         self._contact0 = low0 < CONTACT_HEIGHT  # C_j of m0: foot near the ground
         self._standing_com = com0[0, 2]
         self._m0_rise = float(com0[:, 2].max() - com0[0, 2])
-
-    @staticmethod
-    def root_nq_of(c: Character) -> int:
-        return c.model.nq - len(c.qpos_idx)
 
     def _kinematics(self, qpos: np.ndarray):
         """World end-effectors [n, E, 3], COM [n, 3] and each foot's lowest point [n, F]."""
@@ -181,7 +178,7 @@ class SkillEnv(gym.Env):
         return d
 
     def _set_motion(self, trace: np.ndarray | None) -> None:
-        """Tabulate m_a on the reference grid: pose, end-effectors (root frame), COM, τ̂."""
+        """Tabulate m_a on the reference grid: pose, end-effectors relative to the COM, COM, τ̂."""
         grid = np.arange(len(self._q0), dtype=np.float64)
         if trace is None:
             trace = np.zeros(self.trace_shape)
@@ -198,7 +195,6 @@ class SkillEnv(gym.Env):
         self._eea = ee - com[:, None, :]  # end-effectors relative to the COM
         self._coma = com
         self._tau_hat = np.clip(rows[:, -1], -TAU_LIMIT, TAU_LIMIT)
-        self._trace_in = trace
 
     def _at(self, table: np.ndarray, phi: float) -> np.ndarray:
         x = min(max(phi, 0.0), len(table) - 1.000001)
@@ -236,7 +232,9 @@ class SkillEnv(gym.Env):
         d.qvel[:] = 0.0
         mujoco.mj_kinematics(m, d)
         lowest = d.site_xpos[c.contact_site_ids, 2].min()
-        d.qpos[2 if self.root_nq == 7 else 1] -= lowest - 1e-3  # the lowest foot on the ground
+        d.qpos[1 if self.root_nq == self.root_nv else 2] -= (
+            lowest - 1e-3
+        )  # the lowest foot on the ground
         d.ctrl[:] = np.clip(d.qpos[c.qpos_idx], c.ctrl_low, c.ctrl_high)
         mujoco.mj_forward(m, d)
         self._phi = 0.0
