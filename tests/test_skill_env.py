@@ -168,3 +168,20 @@ def test_checks_the_gymnasium_api(env):
     assert SkillConfig().w_q + SkillConfig().w_ee + SkillConfig().w_com + SkillConfig().w_time == (
         pytest.approx(1.0)
     )
+
+
+def test_motion_trace_displaces_m0_as_eq2():
+    """m_a = m0 ⊕ d̂: joints add, the free root turns by q exp(d1) in its local frame."""
+    env = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, EnvConfig(clip="humanoid_jump"))
+    trace = np.zeros(env.trace_shape)
+    trace[:, 0:3] = [0.1, 0.0, 0.05]  # root position
+    trace[:, 3:6] = [0.0, 0.3, 0.0]  # root rotation vector
+    trace[:, 6 + 2] = 0.2  # the third actuated hinge
+    env.reset(seed=0, options={"motion": trace})
+    q0, qa = env._q0[5], env._qa[5]
+    assert qa[:3] == pytest.approx(q0[:3] + [0.1, 0.0, 0.05])
+    turned = q0[3:7].copy()
+    mujoco.mju_quatIntegrate(turned, np.array([0.0, 0.3, 0.0]), 1.0)
+    assert np.allclose(qa[3:7], turned) or np.allclose(qa[3:7], -turned)
+    idx = env.character.qpos_idx
+    assert qa[idx] - q0[idx] == pytest.approx(np.eye(env.nj)[2] * 0.2)

@@ -24,6 +24,7 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Character, get_character
 from paramimic.config import EnvConfig
@@ -31,7 +32,7 @@ from paramimic.curriculum.fitness import EpisodeTrace, fitness
 from paramimic.curriculum.task_space import TaskSpace
 from paramimic.envs.param_env import INSTABILITY, MAX_SPEED, _compiled
 from paramimic.motion.clip import Clip
-from paramimic.motion.parameterization import TAU_LIMIT
+from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
 
 G = 9.81
 CONTACT_HEIGHT = 0.03  # m: an end-effector of m0 this close to the ground is in contact (C_j)
@@ -152,17 +153,16 @@ class SkillEnv(gym.Env):
         return ee, com, low
 
     def _displaced(self, q0: np.ndarray, d_root: np.ndarray, d_joints: np.ndarray) -> np.ndarray:
-        """m0 ⊕ d (Eq. 2) on qpos rows: root position + d0, root rotation ∘ exp(d1), joints + d."""
+        """m0 ⊕ d (Eq. 2) on qpos rows: root position + d0, root rotation exp(d1), joints + d."""
         q = q0.copy()
-        q[:, self.character.qpos_idx] += d_joints
-        if self.root_nq == self.root_nv:  # planar root: x, z, pitch add
-            q[:, : self.root_nq] += d_root
+        idx = self.character.qpos_idx
+        q[:, idx] = displace_hinges(q0[:, idx], d_joints)
+        if self.root_nq == self.root_nv:  # planar root: x, z and the pitch hinge add
+            q[:, : self.root_nq] = displace_hinges(q0[:, : self.root_nq], d_root)
             return q
-        q[:, :3] += d_root[:, :3]
-        for i in range(len(q)):
-            quat = q[i, 3:7].copy()
-            mujoco.mju_quatIntegrate(quat, d_root[i, 3:], 1.0)  # q exp(d1), d1 in the local frame
-            q[i, 3:7] = quat
+        rotations = Rotation.from_quat(q0[:, 3:7], scalar_first=True)
+        q[:, :3], rotated = displace(q0[:, :3], rotations, d_root[:, :3], d_root[:, 3:])
+        q[:, 3:7] = rotated.as_quat(scalar_first=True)
         return q
 
     def _root_displacement(self, qpos: np.ndarray, q0: np.ndarray, x0: float) -> np.ndarray:
