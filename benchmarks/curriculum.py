@@ -81,6 +81,28 @@ def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dic
         "seconds": time.perf_counter() - t0,
         "phase_switches": trainer.curriculum.phase.switches,
         "curve": curve,
+        "elites": final_elites(run_dir),
+    }
+
+
+def final_elites(run_dir: Path) -> dict:
+    """The elite set in the run's last checkpoint: names, params a', fitness, and per task
+    dimension the range the elites cover."""
+    from services.learner import checkpoint
+
+    state = checkpoint.load(checkpoint.resolve(run_dir))
+    table = state["curriculum"]["elites"]
+    names = list(state["config"]["task"])
+    params = np.asarray(table["params"]).reshape(-1, len(names))
+    return {
+        "names": names,
+        "params": params.tolist(),
+        "fitness": table["fitness"],
+        "ranges": {
+            n: [float(params[:, i].min()), float(params[:, i].max())] for i, n in enumerate(names)
+        }
+        if len(params)
+        else {},
     }
 
 
@@ -130,7 +152,21 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=400_000)
     p.add_argument("--seeds", default="0")
     p.add_argument("--out", default=str(RESULTS / "curriculum.json"))
+    p.add_argument(
+        "--add-elites",
+        action="store_true",
+        help="only add the final elite sets of the runs in --out from their checkpoints",
+    )
     args = p.parse_args()
+    if args.add_elites:
+        out = Path(args.out)
+        result = json.loads(out.read_text())
+        for r in result["runs"]:
+            run_dir = ROOT / "runs" / "bench_curriculum" / f"{r['sampling']}_s{r['seed']}"
+            r["elites"] = final_elites(run_dir)
+            print(r["sampling"], r["seed"], r["elites"]["ranges"])
+        out.write_text(json.dumps(result, indent=1))
+        return
     seeds = [int(s) for s in args.seeds.split(",")]
     runs = []
     for seed in seeds:
