@@ -93,6 +93,9 @@ def test_batches_measure_exploration_rates_and_switch_phases():
     eps = [episode(i, (0.105 * i, 0.95), 0.9, deal["batch"], 1.0) for i in range(10)]
     c.ingest(eps)
     assert c.phase.rate_surrounding == pytest.approx(1.0)
+    # late episodes of the closed batch (dealt ahead) change neither rates nor the history
+    c.ingest([episode(200 + i, (0.5, 0.5), 0.1, 1, 1.0) for i in range(3)])
+    assert c.phase.rate_surrounding == 1.0 and len(c.history) == 1
     deal = c.next_deal(10)  # batch 2: the occasional probe of A_h
     assert deal["region"] == VISITED
     assert np.all(c.density(deal["tasks"]) >= 0.8)
@@ -117,7 +120,7 @@ def test_batches_measure_exploration_rates_and_switch_phases():
     assert c.next_deal(1)["region"] == VISITED  # batch 7: refinement draws from A_h
     s = c.summary()
     assert s["phase"] == "refinement" and s["explored_ratio"] > 0
-    assert [h["episodes"] for h in s["history"]] == [16, 26, 36, 46, 56, 66]
+    assert [h["episodes"] for h in s["history"]] == [16, 29, 39, 49, 59, 69]
 
 
 def test_uniform_sampling_is_the_baseline():

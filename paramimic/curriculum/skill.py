@@ -245,7 +245,12 @@ class SkillCurriculum(AdaptiveCurriculum):
         return n
 
     def _maybe_close(self, batch_id: int, record: dict) -> None:
-        if record["ingested"] < self.sc.batch_size * self.sc.episodes_per_param:
+        """Once a batch has all its episodes: its exploration rate feeds the phase switch and
+        ER is recorded. Late episodes of a closed batch (dealt ahead) count only as elites."""
+        if (
+            "closed" in record
+            or record["ingested"] < self.sc.batch_size * self.sc.episodes_per_param
+        ):
             return
         rate = record["improved"] / record["ingested"]
         if record["region"] in (VISITED, SURROUNDING):
