@@ -145,7 +145,6 @@ class SkillCurriculumConfig(Section):
     density_visited: PositiveFloat = Field(0.8, description="D: A_h where density >= D (§6.2)")
     density_surrounding: PositiveFloat = Field(0.2, description="D': A_s from D' (§6.2)")
     bandwidth: PositiveFloat = Field(0.1, description="kernel width h of Eq. 15 (normalized)")
-    refine_k: float = Field(10.0, ge=0, description="k of Eq. 17 in refinement ([L21] §6.2)")
     probe_every: int = Field(4, ge=2, description="every n-th batch samples the other region")
     knn_k: int = Field(5, ge=1, description="k of the kNN proxy (Eq. 14, §5.3)")
     knn_sigma: PositiveFloat = Field(0.28, description="σ_k of Eq. 14 (§5.3)")
@@ -176,7 +175,11 @@ class SkillCurriculumConfig(Section):
 class CurriculumConfig(Section):
     """Adaptive sampling of task parameters ([WL19] §4.2, Alg. 1, Table 2)."""
 
-    k: float = Field(10.0, ge=0, description="uniformity k of exp(-k(V̄-μ)/μ); 0 = uniform")
+    k: float = Field(
+        10.0,
+        ge=0,
+        description="uniformity k of exp(-k(V̄-μ)/μ) ([WL19] Eq. 10; [L21] Eq. 17 in refinement)",
+    )
     n_mcmc: int = Field(1000, ge=1, description="N_MCMC, samples per buffer refill")
     p_mcmc: int = Field(20, ge=1, description="P_MCMC, iterations between refills")
     chains: int = Field(16, ge=1, description="Metropolis-Hastings chains")

@@ -176,7 +176,7 @@ class SkillCurriculum(AdaptiveCurriculum):
 
     def _refinement_samples(self, n: int) -> np.ndarray:
         """n parameters in A_h by Metropolis-Hastings on exp(−k(V̄−μ)/μ) (Eq. 17)."""
-        D, k = self.sc.density_visited, self.sc.refine_k
+        D, k = self.sc.density_visited, self.sampler.k  # k = 10 ([L21] §6.2), set via the API
         v_bar = None if self.layers is None else marginal_function(self.layers, self.space)
         mu = self.mu
 
