@@ -5,17 +5,20 @@ with π0, hindsight elites, P_θ); ER is measured the same way for both (share o
 whose elite density is at least D = 0.8, on 2,048 fixed probe points).
 
     pip install -e ".[bench]"
-    python benchmarks/curriculum.py [--steps 400000] [--seeds 0] [--config configs/walker_jump.yaml]
+    python benchmarks/curriculum.py [--steps 400000] [--seeds 0] [--jobs 2]
+        [--config configs/walker_jump.yaml]
 
 Writes benchmarks/results/curriculum.json (per run: N, ER, elites, phase per iteration; the ER
 of each run at common N; the ratio curriculum / uniform) and benchmarks/results/curriculum.png.
-Runs in-process (the serial backend), one run after the other.
+Each run is the serial backend in its own process; --jobs runs that many at once (default 2,
+one per core: the learner uses one torch thread).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import sys
 import time
 from pathlib import Path
@@ -151,6 +154,7 @@ def main() -> None:
     p.add_argument("--config", default="configs/walker_jump.yaml")
     p.add_argument("--steps", type=int, default=400_000)
     p.add_argument("--seeds", default="0")
+    p.add_argument("--jobs", type=int, default=2, help="runs at once, one process each")
     p.add_argument("--out", default=str(RESULTS / "curriculum.json"))
     p.add_argument(
         "--add-elites",
@@ -168,11 +172,19 @@ def main() -> None:
         out.write_text(json.dumps(result, indent=1))
         return
     seeds = [int(s) for s in args.seeds.split(",")]
-    runs = []
-    for seed in seeds:
-        for sampling in ("curriculum", "uniform"):
-            run_dir = ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}"
-            runs.append(run(args.config, sampling, args.steps, seed, run_dir))
+    jobs = [
+        (
+            args.config,
+            sampling,
+            args.steps,
+            seed,
+            ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}",
+        )
+        for seed in seeds
+        for sampling in ("curriculum", "uniform")
+    ]
+    with multiprocessing.get_context("spawn").Pool(max(1, args.jobs)) as pool:
+        runs = pool.starmap(run, jobs)
     result = {
         "config": args.config,
         "steps": args.steps,
