@@ -58,6 +58,14 @@ def train(
     resume: Annotated[
         bool, typer.Option("--resume", help="continue from the run's latest checkpoint")
     ] = False,
+    resume_if_exists: Annotated[
+        bool,
+        typer.Option(
+            "--resume-if-exists",
+            help="continue from the latest checkpoint if the run has one, else start it "
+            "(for a supervisor that restarts the learner)",
+        ),
+    ] = False,
     seed: Annotated[int | None, typer.Option(help="override train.seed")] = None,
 ) -> None:
     """Train a controller for CONFIG: Redis, Ray actors, the sampler and the API, or --serial."""
@@ -78,6 +86,10 @@ def train(
         _fail(str(e))
     if not 0 <= api_port < 65536:
         _fail(f"--api-port must be in 0..65535, got {api_port}")
+    if resume_if_exists:
+        from services.learner import checkpoint
+
+        resume = (checkpoint.checkpoint_dir(cfg.resolved_run_dir()) / checkpoint.LATEST).exists()
     options = LaunchOptions(
         resume, serial, ray_address, redis_url, api, api_host, api_port, api_token or None
     )

@@ -57,6 +57,10 @@ class RolloutActor:
     def pid(self) -> int:
         return os.getpid()
 
+    def node(self) -> tuple[str, str]:
+        """(Ray node id, node IP) of the node this actor runs on."""
+        return ray.get_runtime_context().get_node_id(), ray.util.get_node_ip_address()
+
     def peak_rss_mb(self) -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 

@@ -34,6 +34,8 @@ class Progress(BaseModel):
     steps_per_second: float | None = None
     mean_return: float | None = None
     fall_percent: float | None = None
+    actors: int | None = Field(None, description="rollout actors in the pool (Ray runs)")
+    nodes: int | None = Field(None, description="Ray nodes those actors run on")
     updated_at: float | None = None
 
 

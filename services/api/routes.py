@@ -144,6 +144,8 @@ async def progress(run: RunId, r: RedisDep):
         steps_per_second=_num(p.get("steps_per_second")),
         mean_return=_num(p.get("mean_return")),
         fall_percent=_num(p.get("fall_percent")),
+        actors=_num(p.get("actors"), int),
+        nodes=_num(p.get("nodes"), int),
         updated_at=_num(p.get("updated_at")),
     )
 

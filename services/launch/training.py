@@ -196,6 +196,9 @@ def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, servi
 
             def on_metrics(m: dict) -> None:
                 reporter.progress(m)
+                for kind, message, data in backend.take_events():  # nodes lost and joined
+                    reporter.event(kind, message, {**data, "iteration": m["iteration"]})
+                    console.print(f"[yellow]{message}[/]")
                 show(m)
 
             trainer.train(

@@ -19,6 +19,8 @@ PROGRESS_FIELDS = (
     "steps_per_second",
     "mean_return",
     "fall_percent",
+    "actors",
+    "nodes",
 )
 
 

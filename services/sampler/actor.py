@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 
 import ray
+from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
 from services.keys import RAY_NAMESPACE, sampler_actor_name
 from services.sampler.service import SamplerService
@@ -22,9 +23,11 @@ class SamplerActor(SamplerService):
 
 
 def start_sampler(config: dict, redis_url: str, run_id: str):
-    """Create the run's named sampler actor and wait until it has loaded its state."""
-    handle = SamplerActor.options(name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE).remote(
-        config, redis_url, run_id
-    )
+    """Create the run's named sampler actor on the learner's node (it goes when the learner
+    goes; a worker node leaving must not take it) and wait until it has loaded its state."""
+    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=True)
+    handle = SamplerActor.options(
+        name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE, scheduling_strategy=here
+    ).remote(config, redis_url, run_id)
     ray.get(handle.pid.remote())
     return handle
