@@ -35,6 +35,13 @@ def train(
         str | None,
         typer.Option(help="join this Ray cluster (default: $RAY_ADDRESS, else start a local one)"),
     ] = None,
+    node_ip_address: Annotated[
+        str | None,
+        typer.Option(
+            help="with --ray-address: this machine's address in the cluster, if it has several "
+            "(the learner attaches to the Ray node there)"
+        ),
+    ] = None,
     redis_url: Annotated[
         str | None,
         typer.Option(
@@ -91,7 +98,15 @@ def train(
 
         resume = (checkpoint.checkpoint_dir(cfg.resolved_run_dir()) / checkpoint.LATEST).exists()
     options = LaunchOptions(
-        resume, serial, ray_address, redis_url, api, api_host, api_port, api_token or None
+        resume,
+        serial,
+        ray_address,
+        node_ip_address,
+        redis_url,
+        api,
+        api_host,
+        api_port,
+        api_token or None,
     )
     try:
         code = run_training(cfg, options, console)

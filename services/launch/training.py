@@ -36,6 +36,7 @@ class LaunchOptions:
     resume: bool = False
     serial: bool = False
     ray_address: str | None = None
+    node_ip: str | None = None
     redis_url: str | None = None
     api: bool = True
     api_host: str = "127.0.0.1"
@@ -148,7 +149,7 @@ def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, servi
         redis_url = server.start()
         services.callback(server.stop)
         console.print(f"Redis: embedded, {redis_url}, AOF in {server.data_dir}")
-    if connect(opts.ray_address):
+    if connect(opts.ray_address, opts.node_ip):
         services.callback(ray.shutdown)
     run_id = run_id_for(run_dir, cfg, opts.resume)
     reporter = RunReporter(redis_url, run_id)

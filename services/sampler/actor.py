@@ -25,7 +25,7 @@ class SamplerActor(SamplerService):
 def start_sampler(config: dict, redis_url: str, run_id: str):
     """Create the run's named sampler actor on the learner's node (it goes when the learner
     goes; a worker node leaving must not take it) and wait until it has loaded its state."""
-    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=True)
+    here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
     handle = SamplerActor.options(
         name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE, scheduling_strategy=here
     ).remote(config, redis_url, run_id)
