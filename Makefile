@@ -32,6 +32,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/learning.py
 	$(BIN)/python benchmarks/throughput.py
 	$(BIN)/python benchmarks/sampler.py
+	$(BIN)/python benchmarks/scaling.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
