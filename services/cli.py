@@ -98,15 +98,15 @@ def train(
 
         resume = (checkpoint.checkpoint_dir(cfg.resolved_run_dir()) / checkpoint.LATEST).exists()
     options = LaunchOptions(
-        resume,
-        serial,
-        ray_address,
-        node_ip_address,
-        redis_url,
-        api,
-        api_host,
-        api_port,
-        api_token or None,
+        resume=resume,
+        serial=serial,
+        ray_address=ray_address,
+        node_ip=node_ip_address,
+        redis_url=redis_url,
+        api=api,
+        api_host=api_host,
+        api_port=api_port,
+        api_token=api_token or None,
     )
     try:
         code = run_training(cfg, options, console)

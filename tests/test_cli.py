@@ -58,6 +58,20 @@ def test_train_then_eval_writes_json(tmp_path):
     assert json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])["iteration"] == 3
 
 
+def test_resume_if_exists_starts_a_new_run_then_continues_it(tmp_path):
+    """What the compose learner runs on every (re)start."""
+    cfg = tmp_path / "tiny.yaml"
+    cfg.write_text(yaml.safe_dump(TINY))
+    run = tmp_path / "run"
+    res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume-if-exists")
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "resumed" not in res.stdout
+    res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume-if-exists",
+               "--total-steps", 768)  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "resumed at iteration 2" in res.stdout
+
+
 SKILL = {
     "character": "walker",
     "task": {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]},
