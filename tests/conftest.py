@@ -58,3 +58,23 @@ def api_url(redis_server, tmp_path_factory):
     api.start()
     yield api.url
     api.stop()
+
+
+def _wait_until(predicate, timeout: float, what: str, every: float = 1.0):
+    """Call `predicate` until it returns something truthy (returned) or `timeout` s pass."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(every)
+
+
+@pytest.fixture
+def wait_until():
+    """`wait_until(predicate, timeout, what)`: poll until truthy, fail naming `what`."""
+    return _wait_until

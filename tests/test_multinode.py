@@ -9,7 +9,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -32,18 +31,7 @@ def cluster():
         c.stop()
 
 
-def _wait(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(1.0)
-
-
-def test_actors_on_two_nodes_survive_a_node_leaving(cluster, redis_server, tmp_path):
+def test_actors_on_two_nodes_survive_a_node_leaving(cluster, redis_server, tmp_path, wait_until):
     config = yaml.safe_load((ROOT / "configs" / "walker_legs.yaml").read_text())
     config["ppo"].update(num_steps=512, minibatch_size=256, num_epochs=2)
     config["actors"] = {"num_envs": 4, "num_actors": "auto", "lost_timeout": 300}
@@ -78,16 +66,20 @@ def test_actors_on_two_nodes_survive_a_node_leaving(cluster, redis_server, tmp_p
 
     try:
         # one actor per CPU of the cluster (auto): one on the head, one on the worker node
-        p = _wait(lambda: (q := progress()).get("iteration", 0) >= 2 and q, 300, "2 iterations")
+        p = wait_until(
+            lambda: (q := progress()).get("iteration", 0) >= 2 and q, 300, "2 iterations"
+        )
         assert (p["actors"], p["nodes"]) == (2, 2), p
         cluster.workers[0].stop()  # the node leaves mid-run
-        lost_at = _wait(
+        lost_at = wait_until(
             lambda: "node_lost" in events() and progress()["iteration"], 180, "node_lost event"
         )
-        p = _wait(lambda: (q := progress())["iteration"] >= lost_at + 2 and q, 300, "training on")
+        p = wait_until(
+            lambda: (q := progress())["iteration"] >= lost_at + 2 and q, 300, "training on"
+        )
         assert (p["actors"], p["nodes"]) == (1, 1), p
         cluster.add_worker(cpus=1)  # a node joins: auto grows the pool onto it
-        p = _wait(lambda: (q := progress())["nodes"] == 2 and q, 300, "the pool to grow")
+        p = wait_until(lambda: (q := progress())["nodes"] == 2 and q, 300, "the pool to grow")
         assert p["actors"] == 2 and "node_joined" in events()
         train.send_signal(signal.SIGINT)  # finish the iteration, checkpoint, stop
         assert train.wait(timeout=300) == 0, _tail(tmp_path)

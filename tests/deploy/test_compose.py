@@ -25,7 +25,13 @@ import pytest
 
 from services.launch.processes import free_port
 
-pytestmark = pytest.mark.compose
+pytestmark = [
+    pytest.mark.compose,
+    pytest.mark.skipif(
+        os.geteuid() != 0 or shutil.which("apt-get") is None,
+        reason="the compose test needs root and apt-get to install and start Docker",
+    ),
+]
 ROOT = Path(__file__).resolve().parents[2]
 COMPOSE_FILE = ROOT / "deploy" / "docker-compose.yml"
 BASE = "local/debian:bookworm"
@@ -44,8 +50,6 @@ def _ok(*cmd: str) -> bool:
 @pytest.fixture(scope="module")
 def engine(tmp_path_factory):
     """A running Docker engine with the local base image; what was started is stopped."""
-    if os.geteuid() != 0 or shutil.which("apt-get") is None:
-        pytest.skip("the compose test needs root and apt-get to install and start Docker")
     needed = {
         "docker.io": "dockerd",
         "docker-compose": "docker-compose",
@@ -107,18 +111,7 @@ def _health(project: str) -> dict[str, str]:
     return dict(line.split("\t", 1) for line in out.strip().splitlines())
 
 
-def _wait(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(2.0)
-
-
-def test_compose_cluster_trains_across_workers_and_survives_losing_one(engine):
+def test_compose_cluster_trains_across_workers_and_survives_losing_one(engine, wait_until):
     _local_build_inputs()
     _run("docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={BASE}",
          "-f", str(ROOT / "tests" / "deploy" / "redis.Dockerfile"), "-t", REDIS,
@@ -146,7 +139,7 @@ def test_compose_cluster_trains_across_workers_and_survives_losing_one(engine):
             h = _health(project)
             return len(h) == 6 and all("(healthy)" in s for s in h.values())
 
-        _wait(healthy, 300, "every service healthy")
+        wait_until(healthy, 300, "every service healthy")
         with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10.0) as api:
 
             def progress() -> dict:
@@ -157,13 +150,15 @@ def test_compose_cluster_trains_across_workers_and_survives_losing_one(engine):
                 run = api.get("/runs").json()[0]["run_id"]
                 return [e["type"] for e in api.get(f"/runs/{run}/events").json()]
 
-            p = _wait(lambda: (q := progress()).get("iteration", 0) >= 2 and q, 300, "a run")
+            p = wait_until(lambda: (q := progress()).get("iteration", 0) >= 2 and q, 300, "a run")
             assert (p["actors"], p["nodes"]) == (2, 2), p  # actors on both workers
             victim = _containers(project, "ray-worker")[-1]
             _run("docker", "stop", victim)
-            _wait(lambda: "node_lost" in events(), 180, "the node_lost event")
+            wait_until(lambda: "node_lost" in events(), 180, "the node_lost event")
             it = progress()["iteration"]
-            p = _wait(lambda: (q := progress())["iteration"] >= it + 2 and q, 300, "training on")
+            p = wait_until(
+                lambda: (q := progress())["iteration"] >= it + 2 and q, 300, "training on"
+            )
             assert (p["actors"], p["nodes"], p["status"]) == (1, 1, "running"), p
         # Redis kept its data with AOF, behind the password
         redis = _containers(project, "redis")[0]
