@@ -17,12 +17,14 @@ PositiveFloat = Annotated[float, Field(gt=0)]
 # Task goals and physical conditions understood by the environments besides the character's
 # shape parameters.
 TASK_GOALS = {
-    "target_velocity": "target average COM speed along +x (m/s)",
+    "target_velocity": "target average COM speed (m/s) along the target direction",
+    "target_direction": "heading of the target velocity in the ground plane (rad, 0 = +x; 3D)",
     "gravity": "gravity as a multiple of 9.81 m/s² (skill env)",
     "jump_height": "peak rise of the COM above its standing height (m, skill env)",
 }
 # Characters with a procedural [WL19] gait (ParamEnv); the others imitate clips (SkillEnv)
-PLANAR_GAITS = ("walker", "hopper")
+GAITS = ("walker", "hopper", "biped_lower", "quadruped", "fish", "manta")
+PLANAR = ("walker", "hopper")  # sagittal-plane bodies: no target direction
 # Reference clips of the skill env, by name -> the characters they fit
 CLIPS = {"planar_jump": ("walker", "hopper"), "humanoid_jump": ("humanoid",)}
 CLIPS |= {f"humanoid_{n}": ("humanoid",) for n in ("walk", "run", "backflip", "cartwheel")}
@@ -47,6 +49,9 @@ class RewardConfig(Section):
     sigma_com_velocity: PositiveFloat = 0.2  # σ4
     sigma_direction: PositiveFloat = 0.05  # σ5
     sigma_torque: PositiveFloat = 0.1  # σ6
+    normalize: bool = Field(
+        True, description="scale velocity, direction and energy by the body ([WL19] §4.3)"
+    )
 
 
 class SkillConfig(Section):
@@ -80,6 +85,12 @@ class EnvConfig(Section):
     action_scale: PositiveFloat = Field(0.5, description="rad of PD target offset per unit action")
     imitation: bool = Field(True, description="follow the character's procedural reference motion")
     target_velocity: float = Field(1.0, description="target speed when the task space has none")
+    target_direction: float = Field(
+        0.0, description="target heading (rad) when the task space has none (3D characters)"
+    )
+    ground_fit: bool = Field(
+        True, description="fit a new body's feet to the base's contacts ([WL19] Eq. 1) at reset"
+    )
     com_velocity_window: PositiveFloat = Field(
         2.0, description="seconds over which the COM velocity is averaged ([WL19] Eq. 6)"
     )
@@ -267,7 +278,9 @@ class ExperimentConfig(Section):
                 )
             if lo > hi:
                 raise ValueError(f"task.{name}: min {lo} > max {hi}")
-            if name not in ("target_velocity", "jump_height") and lo <= 0:
+            if name in TASK_GOALS and name != "gravity":
+                continue
+            if lo <= 0:
                 raise ValueError(f"task.{name}: scales must be positive, got min {lo}")
         clip = self.env.clip
         if clip is not None and self.character not in CLIPS.get(clip, ()):
@@ -275,10 +288,14 @@ class ExperimentConfig(Section):
                 f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
                 + ", ".join(f"{k} ({'/'.join(v)})" for k, v in CLIPS.items())
             )
-        if clip is None and self.character not in PLANAR_GAITS:
+        if clip is None and self.character not in GAITS:
             raise ValueError(
                 f"character {self.character!r} has no [WL19] gait; set env.clip "
                 f"(one of {sorted(k for k, v in CLIPS.items() if self.character in v)})"
+            )
+        if "target_direction" in self.task and self.character in PLANAR:
+            raise ValueError(
+                f"task.target_direction: {self.character!r} moves in the sagittal plane only"
             )
         skill_only = {"gravity", "jump_height"} & set(self.task)
         if clip is None and skill_only:

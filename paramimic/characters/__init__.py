@@ -1,5 +1,6 @@
 """Parametric characters: base bodies and the shape map F(B̄, b) ([WL19] §3.1)."""
 
+from paramimic.characters.articulated import BIPED_LOWER, FISH, MANTA, QUADRUPED
 from paramimic.characters.body import (
     Character,
     CharacterDef,
@@ -10,7 +11,9 @@ from paramimic.characters.body import (
 from paramimic.characters.humanoid import HUMANOID
 from paramimic.characters.planar import HOPPER, WALKER
 
-CHARACTERS: dict[str, CharacterDef] = {c.name: c for c in (WALKER, HOPPER, HUMANOID)}
+CHARACTERS: dict[str, CharacterDef] = {
+    c.name: c for c in (WALKER, HOPPER, HUMANOID, BIPED_LOWER, QUADRUPED, FISH, MANTA)
+}
 
 
 def get_character(name: str) -> CharacterDef:

@@ -33,6 +33,7 @@ class Joint:
     kp: float
     torque: float
     kv_ratio: float = 0.1  # kv = kv_ratio * kp
+    axis: tuple[float, float, float] = PLANAR_AXIS  # hinge axis in the body frame
 
 
 @dataclass(frozen=True)
@@ -210,16 +211,7 @@ def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) 
                 armature=0.01,
             )
         _add_geom(body, seg, length, width, shape)
-    for seg in definition.segments:
-        j = seg.joint
-        if j is None:
-            continue
-        act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.set_to_position(kp=j.kp, kv=j.kv_ratio * j.kp)
-        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.ctrlrange = list(j.range)
-        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.forcerange = [-j.torque, j.torque]  # torque limits, [L21] §7.4
+    add_servos(spec, definition.joints)
     add_sensors(
         spec, [j.name for j in definition.joints], definition.end_effectors, definition.root
     )
@@ -239,6 +231,18 @@ class MjSpecResult:
     legs: np.ndarray
     hip_height: float
     lengths: dict[str, float]
+
+
+def add_servos(spec: mujoco.MjSpec, joints) -> None:
+    """A position servo with damping per joint, named as the joint: with the implicit integrator
+    the stable PD controller of [WL19] Eq. 3, clamped to the joint range and torque limit."""
+    for j in joints:
+        act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=j.kp, kv=j.kv_ratio * j.kp)
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = list(j.range)
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-j.torque, j.torque]  # torque limits, [L21] §7.4
 
 
 def add_sensors(
@@ -273,7 +277,8 @@ def add_sensors(
             objtype=obj.mjOBJ_ACTUATOR,
             objname=j,
         )
-    spec.add_sensor(name="up", type=kinds.mjSENS_FRAMEZAXIS, objtype=obj.mjOBJ_BODY, objname=root)
+    # the body frame (XBODY), not its inertial frame, whose axes follow the principal moments
+    spec.add_sensor(name="up", type=kinds.mjSENS_FRAMEZAXIS, objtype=obj.mjOBJ_XBODY, objname=root)
     spec.add_sensor(name="com", type=kinds.mjSENS_SUBTREECOM, objtype=obj.mjOBJ_BODY, objname=root)
 
 

@@ -19,7 +19,14 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from paramimic.characters.body import TIMESTEP, Character, Joint, add_sensors, index_character
+from paramimic.characters.body import (
+    TIMESTEP,
+    Character,
+    Joint,
+    add_sensors,
+    add_servos,
+    index_character,
+)
 from paramimic.motion.clip import ClipPose
 
 DATA = resources.files("paramimic") / "data" / "deepmimic"
@@ -129,15 +136,7 @@ class HumanoidDef:
             if j["Name"] in self.end_effectors:
                 b = shapes[j["Name"]]
                 body.add_site(name=f"{j['Name']}_end", pos=[b["AttachX"], b["AttachY"], 0])
-        for joint in self.joints:
-            act = spec.add_actuator(
-                name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT
-            )
-            act.set_to_position(kp=joint.kp, kv=joint.kv_ratio * joint.kp)
-            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.ctrlrange = list(joint.range)
-            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.forcerange = [-joint.torque, joint.torque]
+        add_servos(spec, self.joints)
         add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
         return spec
 

@@ -22,8 +22,10 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import Character, compile_character, get_character
+from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
 from paramimic.config import TASK_GOALS, EnvConfig
 from paramimic.curriculum.task_space import TaskSpace
+from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.motion import REFERENCE_MOTIONS
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
@@ -67,10 +69,10 @@ class ParamEnv(gym.Env):
             for i, n in enumerate(self.task_space.names)
             if n in self.definition.param_names()
         ]
-        self._velocity_idx = (
-            self.task_space.names.index("target_velocity")
-            if "target_velocity" in self.task_space.names
-            else None
+        names = self.task_space.names
+        self._velocity_idx = names.index("target_velocity") if "target_velocity" in names else None
+        self._direction_idx = (
+            names.index("target_direction") if "target_direction" in names else None
         )
         self.motion = REFERENCE_MOTIONS[character] if self.config.imitation else None
         joint_names = tuple(j.name for j in self.definition.joints)
@@ -78,7 +80,7 @@ class ParamEnv(gym.Env):
             raise ValueError(f"reference motion joints {self.motion.joints} != {joint_names}")
         self.frame_skip = self.config.frame_skip
         self._action_scale = self.config.action_scale
-        self._max_pitch = self.config.max_pitch
+        self._min_up = math.cos(self.config.max_pitch)  # the root's z axis may tilt this far
         self.character: Character
         self.model: mujoco.MjModel
         self.data: mujoco.MjData
@@ -110,7 +112,22 @@ class ParamEnv(gym.Env):
         self._flags_stepping = c.model.opt.disableflags
         self._opt = c.model.opt
         self.data = mujoco.MjData(c.model)
+        # Root: planar (slide x, slide z relative to the build height, pitch) or free (x y z, quat)
+        self._free = c.model.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
+        self._height_adr, self._height_offset = (2, 0.0) if self._free else (1, c.hip_height)
+        self._swims = bool(getattr(self.definition, "swims", False))
         self._fall_height = self.config.fall_height_ratio * c.hip_height
+        self._height_joint = 0 if self._free else c.model.joint("rootz").id
+        base = _compiled(self.definition.name, ())
+        if getattr(self, "_base", None) is not base:
+            self._base, self._base_data = base, mujoco.MjData(base.model)
+        self._scales = (
+            reward_scales(c.leg_lengths, base.leg_lengths, c.mass, base.mass)
+            if self.config.reward.normalize
+            else RewardScales.identity()
+        )
+        if hasattr(self, "_block_exponent_base"):
+            self._scale_energy()
         self._max_qvel_sq = c.model.nv * MAX_SPEED**2
         self._reference = self._tabulate_reference() if self.motion is not None else None
 
@@ -157,7 +174,9 @@ class ParamEnv(gym.Env):
         scale_sq = np.concatenate([np.ones(2 * nj + 3 * n_ee), 1.0 / c.torque_limit**2])
         block_exponent = np.zeros((len(groups), nb))
         block_exponent[np.arange(len(groups)), groups] = scale_sq * exponent[groups]
-        self._block_exponent = block_exponent
+        self._block_exponent_base = block_exponent
+        self._torque_rows = slice(len(groups) - nj, len(groups))
+        self._scale_energy()
         self._w_block = w[:nb]
         self._zero_reference = np.zeros(len(groups))
         # block bells -> reported terms: pose, velocity, Σ end-effector, (COM velocity,
@@ -169,11 +188,19 @@ class ParamEnv(gym.Env):
         self._term_matrix = tm
         self._w_com, self._w_dir = float(w[nb]), float(w[nb + 1])
         self._exp_com, self._exp_dir = float(exponent[nb]), float(exponent[nb + 1])
-        # sensordata entries the observation reads: joints, end-effector x and z, up vector x, z
-        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, [0, 2]].ravel()
-        self._obs_sensors = np.concatenate(
-            [np.arange(2 * nj), ee, [c.up_sensor.start, c.up_sensor.start + 2]]
-        )
+        # sensordata entries the observation reads: joints, end-effectors and the up vector, in
+        # the sagittal plane (x, z) for planar bodies, all of x, y, z for free ones
+        axes = [0, 1, 2] if self._free else [0, 2]
+        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, axes].ravel()
+        up = c.up_sensor.start + np.array(axes)
+        self._obs_sensors = np.concatenate([np.arange(2 * nj), ee, up])
+        self._root_velocity = slice(0, 6) if self._free else slice(0, 3)
+
+    def _scale_energy(self) -> None:
+        """[WL19] Table 1: the torque (energy) bell's exponent × m0/m for this body."""
+        e = self._block_exponent_base.copy()
+        e[self._torque_rows] *= self._scales.energy
+        self._block_exponent = e
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
@@ -237,12 +264,7 @@ class ParamEnv(gym.Env):
         """Reference state at a random phase with noise ([WL19] Alg. 1 l.8), feet on the floor."""
         c, d, m = self.character, self.data, self.model
         mujoco.mj_resetData(m, d)
-        self._target_v = (
-            float(self._task[self._velocity_idx])
-            if self._velocity_idx is not None
-            else self.config.target_velocity
-        )
-        self._target_sign = 1.0 if self._target_v >= 0 else -1.0
+        self._set_targets()
         self._phase = phase
         self._dphase = self.dt / self.motion.period if self.motion is not None else 0.0
         noise = self.config.init_noise
@@ -251,10 +273,12 @@ class ParamEnv(gym.Env):
             d.qpos[c.qpos_idx] = self.motion.pose(phase) + noise * rng.standard_normal(nj)
             d.qvel[c.qvel_idx] = self.motion.velocity(phase) + noise * rng.standard_normal(nj)
         d.qpos[c.qpos_idx] = np.clip(d.qpos[c.qpos_idx], c.ctrl_low, c.ctrl_high)
-        d.qvel[0] = self._target_v  # root x velocity
-        mujoco.mj_kinematics(m, d)
-        lowest = d.site_xpos[c.contact_site_ids, 2].min()
-        d.qpos[1] -= lowest - 1e-3  # rootz: the lowest foot point touches the ground
+        d.qvel[0] = self._target_vel[0]  # root velocity along the target
+        if self._free:
+            d.qvel[1] = self._target_vel[1]
+        if len(c.contact_site_ids):
+            d.qpos[:] = self._on_ground(d.qpos.copy())
+            d.qpos[self._height_adr] += 1e-3
         d.ctrl[:] = d.qpos[c.qpos_idx]
         mujoco.mj_forward(m, d)
         self._sense()
@@ -263,6 +287,80 @@ class ParamEnv(gym.Env):
         self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
         self._com_vel = (0.0, 0.0, 0.0)
         self._next_reference = None
+
+    def _set_targets(self) -> None:
+        """Target speed and direction of the task, normalized for the body ([WL19] Table 1)."""
+        base_v = (
+            float(self._task[self._velocity_idx])
+            if self._velocity_idx is not None
+            else self.config.target_velocity
+        )
+        self._target_v = self._scales.velocity * base_v
+        heading = (
+            float(self._task[self._direction_idx])
+            if self._direction_idx is not None
+            else self.config.target_direction
+        )
+        # d′: the target direction in the ground plane (a negative speed means backwards)
+        sign = 1.0 if self._target_v >= 0 else -1.0
+        self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
+        self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
+
+    def _on_ground(self, qpos: np.ndarray) -> np.ndarray:
+        """The initial posture on the ground. A body other than the base is fitted by [WL19]
+        Eq. 1 to the base body's contact points in the same pose; the base (or a failed fit)
+        is moved vertically until its lowest foot point touches."""
+        c = self.character
+        if self.config.ground_fit and c.shape != self._base.shape:
+            base, bd = self._base, self._base_data
+            bd.qpos[:] = lift_to_ground(
+                base.model, bd, qpos, base.contact_site_ids, self._height_adr
+            )
+            mujoco.mj_kinematics(base.model, bd)
+            targets = bd.site_xpos[base.contact_site_ids]
+            joints = c.model.actuator_trnid[:, 0]
+            return fit_ground_contact(
+                c.model, self.data, qpos, targets, c.contact_site_ids, self._height_joint, joints
+            ).qpos
+        return lift_to_ground(c.model, self.data, qpos, c.contact_site_ids, self._height_adr)
+
+    def set_shape(self, shape: Mapping[str, float]) -> np.ndarray:
+        """Change the body mid-episode ([WL19] §5.2): rebuild the model for the new shape, copy
+        joint positions, velocities and controls, lift the body out of the ground if its limbs
+        grew, and carry on from the same state and phase. The shape parameters must be task
+        dimensions (the policy observes them). Returns the new observation."""
+        a = self._task.copy()
+        shape_dims = dict(self._shape_idx)
+        for name, value in shape.items():
+            if name not in shape_dims:
+                raise ValueError(
+                    f"{name!r} is not a shape dimension of this task space; "
+                    f"shape dimensions: {sorted(shape_dims)}"
+                )
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
+            a[shape_dims[name]] = float(value)
+        old, c = self.data, self.character
+        com_before = old.sensordata[c.com_sensor].copy()
+        self._task = a
+        self._load(a)
+        c, d, m = self.character, self.data, self.model
+        d.qpos[:], d.qvel[:], d.ctrl[:] = old.qpos, old.qvel, old.ctrl
+        d.time = old.time
+        mujoco.mj_forward(m, d)
+        depth = -min((d.contact.dist[i] for i in range(d.ncon)), default=0.0)
+        if depth > 0:  # lift until no penetration
+            d.qpos[self._height_adr] += depth + 1e-4
+            mujoco.mj_forward(m, d)
+        self._sense()
+        self._unstable = int(d.warning.number[INSTABILITY].sum())
+        self._set_targets()
+        # the average COM velocity continues: shift its history by the COM's jump
+        shift = d.sensordata[c.com_sensor] - com_before
+        self._com = [tuple((np.array(p) + shift).tolist()) for p in self._com]
+        obs = self._observe()
+        self._last_obs = obs
+        return obs
 
     # --- step ---------------------------------------------------------------------------------
 
@@ -300,8 +398,9 @@ class ParamEnv(gym.Env):
         reward, terms = self._reward(ref)
         obs = self._observe()
         self._last_obs = obs
-        qpos = d.qpos
-        fell = bool(qpos[1] + c.hip_height < self._fall_height or abs(qpos[2]) > self._max_pitch)
+        height = d.qpos[self._height_adr] + self._height_offset
+        tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
+        fell = not self._swims and bool(height < self._fall_height or tilted)
         truncated = self._steps >= self._max_steps and not fell
         info = {
             "task": self._task.copy(),
@@ -341,10 +440,16 @@ class ParamEnv(gym.Env):
         bells = np.exp(sq @ self._block_exponent)  # Eq. 5 pose, velocity, each ee; Eq. 7 τ
         terms = (bells @ self._term_matrix).tolist()
         vx, vy, _ = self._com_vel
-        vx -= self._target_v
+        vx -= self._target_vel[0]
+        vy -= self._target_vel[1]
         terms[3] = math.exp((vx * vx + vy * vy) * self._exp_com)  # Eq. 6: COM velocity
-        fx = d.xmat[self.character.root_body_id, 0]  # root forward axis (planar: x component)
-        terms[4] = 1.0 if fx * self._target_sign > 0 else math.exp(2.0 * self._exp_dir)  # Eq. 6
+        # Eq. 6: facing direction d (the root's x axis in the ground plane) against d′, the
+        # error scaled by the body's leg symmetry ([WL19] Table 1)
+        xmat = d.xmat[self.character.root_body_id]
+        fx, fy = xmat[0], xmat[3]
+        norm = math.hypot(fx, fy) or 1.0
+        ex, ey = fx / norm - self._target_dir[0], fy / norm - self._target_dir[1]
+        terms[4] = math.exp(self._scales.direction * (ex * ex + ey * ey) * self._exp_dir)
         terms[6] = self._w_com * terms[3] + self._w_dir * terms[4]  # task share of the reward
         reward = float(bells @ self._w_block) + terms[6]
         return reward, dict(zip(REWARD_TERMS, terms, strict=True))
@@ -353,13 +458,16 @@ class ParamEnv(gym.Env):
         c, d = self.character, self.data
         phase = self._phase
         vx, _, vz = self._com_vel
-        scalars = (d.qpos[1] + c.hip_height, self._target_v, vx, vz)
+        height = d.qpos[self._height_adr] + self._height_offset
         parts = [
             self._task,
-            d.sensordata[self._obs_sensors],  # joint q, dq, end-effectors (x, z), up vector
-            d.qvel[0:3],  # root velocity: x, z, pitch rate
-            scalars,  # root height, target speed, average COM velocity (x, z)
+            d.sensordata[self._obs_sensors],  # joint q, dq, end-effectors, up vector
+            d.qvel[self._root_velocity],  # root velocity (planar: x, z, pitch rate)
+            (height, self._target_v, vx, vz),  # root height, target speed, average COM vel.
         ]
+        if self._free:  # heading: the root's x axis, the target direction, COM velocity y
+            xmat = d.xmat[c.root_body_id]
+            parts.append((xmat[0], xmat[3], xmat[6], *self._target_dir, self._com_vel[1]))
         if self._reference is not None:
             x = 2.0 * math.pi * phase
             parts.append((math.sin(x), math.cos(x)))

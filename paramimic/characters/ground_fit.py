@@ -1,0 +1,179 @@
+"""Ground-contact fitting of a new body ([WL19] Eq. 1).
+
+q* = argmin_q Σ_i Σ_j ‖c_ij(q) − c̄_ij‖² + w_q ‖q − q0‖²: the contact points c_ij (the four
+lower corners of each box foot) of the scaled character should land where the base character's
+are, in a posture near q0. Only the root's height and the actuated joints move (the paper fixes
+the other root DOFs). Points that touch the ground on the base stay exactly on it (equality
+constraints), which SLSQP handles; the gradient comes from MuJoCo's site Jacobians. When the
+optimizer fails the body is lifted (or lowered) vertically until its lowest point touches.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.linalg import qr
+from scipy.optimize import minimize
+
+W_Q = 0.01  # w_q: posture regularizer weight
+ON_GROUND = 2e-3  # m: a base contact point this low is on the ground
+TOLERANCE = 1e-3  # m: accepted violation of the ground constraints
+
+
+@dataclass
+class GroundFit:
+    qpos: np.ndarray  # the fitted posture (full qpos)
+    method: str  # "slsqp" or "lift"
+    objective: float  # Eq. 1 at qpos
+
+
+def lift_to_ground(model: mujoco.MjModel, data: mujoco.MjData, qpos, sites, height_adr: int):
+    """qpos moved vertically so that the lowest of `sites` touches the ground (z = 0)."""
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    out = np.array(qpos, dtype=np.float64)
+    out[height_adr] -= data.site_xpos[sites, 2].min()
+    return out
+
+
+class _Problem:
+    """Eq. 1 over x = (root height, joint angles), evaluated once per x."""
+
+    def __init__(self, model, data, q0, targets, sites, qadr, dofs, weight):
+        self.model, self.data = model, data
+        self.q0 = np.array(q0, dtype=np.float64)
+        self.targets, self.sites, self.weight = targets, sites, weight
+        self.qadr, self.dofs = qadr, dofs  # x -> qpos addresses and dof columns
+        self.on_ground = np.flatnonzero(targets[:, 2] < ON_GROUND)
+        self._x: np.ndarray | None = None
+        self._jac = np.zeros((3, model.nv))
+        self.on_ground = self._independent(self.on_ground)
+
+    def _independent(self, points: np.ndarray) -> np.ndarray:
+        """A subset of on-ground points whose height constraints are independent at q0 (the
+        corners of a rigid flat sole are coplanar: three fix the fourth; a planar body's left
+        and right corners coincide). SLSQP fails on redundant equality constraints."""
+        if not len(points):
+            return points
+        self._eval(self.x0())
+        rows = self.jac[points, 2, :]
+        _, r, pivots = qr(rows.T, pivoting=True, mode="economic")
+        diag = np.abs(np.diag(r))
+        rank = int((diag > 1e-8 * max(diag.max(), 1e-12)).sum())
+        return np.sort(points[pivots[:rank]])
+
+    def x0(self) -> np.ndarray:
+        return self.q0[self.qadr].copy()
+
+    def qpos(self, x: np.ndarray) -> np.ndarray:
+        q = self.q0.copy()
+        q[self.qadr] = x
+        return q
+
+    def _eval(self, x: np.ndarray) -> None:
+        if self._x is not None and np.array_equal(x, self._x):
+            return
+        m, d = self.model, self.data
+        d.qpos[:] = self.qpos(x)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        self.points = d.site_xpos[self.sites].copy()  # [P, 3]
+        jac = np.zeros((len(self.sites), 3, len(self.dofs)))
+        for k, s in enumerate(self.sites):
+            mujoco.mj_jacSite(m, d, self._jac, None, int(s))
+            jac[k] = self._jac[:, self.dofs]
+        self.jac = jac  # [P, 3, X]
+        self._x = x.copy()
+
+    def objective(self, x: np.ndarray) -> float:
+        self._eval(x)
+        r = self.points - self.targets
+        dq = x[1:] - self.q0[self.qadr[1:]]  # the root height is not regularized
+        return float((r * r).sum() + self.weight * dq @ dq)
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        self._eval(x)
+        r = self.points - self.targets
+        g = 2.0 * np.einsum("pc,pcx->x", r, self.jac)
+        g[1:] += 2.0 * self.weight * (x[1:] - self.q0[self.qadr[1:]])
+        return g
+
+    def ground(self, x: np.ndarray) -> np.ndarray:
+        self._eval(x)
+        return self.points[self.on_ground, 2]
+
+    def ground_jac(self, x: np.ndarray) -> np.ndarray:
+        self._eval(x)
+        return self.jac[self.on_ground, 2, :]
+
+    def above(self, x: np.ndarray) -> np.ndarray:
+        self._eval(x)
+        return self.points[:, 2]
+
+    def above_jac(self, x: np.ndarray) -> np.ndarray:
+        self._eval(x)
+        return self.jac[:, 2, :]
+
+
+def fit_ground_contact(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    q0: np.ndarray,
+    targets: np.ndarray,
+    sites: np.ndarray,
+    height_joint: int,
+    joints: np.ndarray,
+    weight: float = W_Q,
+    maxiter: int = 100,
+) -> GroundFit:
+    """Solve Eq. 1 by SLSQP from q0; `targets` [P, 3] are the base's contact points c̄ for the
+    contact `sites` [P]; `height_joint` is the root's vertical DOF (a slide, or a free joint
+    whose third coordinate is the height), `joints` the actuated hinge joint ids. Falls back to
+    `lift_to_ground` when SLSQP fails or leaves a ground point off by more than 1 mm."""
+    targets = np.asarray(targets, dtype=np.float64)
+    sites = np.asarray(sites)
+    joints = np.asarray(joints)
+    free = model.jnt_type[height_joint] == mujoco.mjtJoint.mjJNT_FREE
+    height = model.jnt_qposadr[height_joint] + (2 if free else 0)  # a free joint's z
+    qadr = np.array([height, *model.jnt_qposadr[joints]])
+    dofs = np.array(
+        [model.jnt_dofadr[height_joint] + (2 if free else 0), *model.jnt_dofadr[joints]]
+    )
+    problem = _Problem(model, data, q0, targets, sites, qadr, dofs, weight)
+    ranges = model.jnt_range[joints]
+    bounds = [(None, None), *[(lo, hi) for lo, hi in ranges]]
+    x0 = np.clip(
+        problem.x0(),
+        [b[0] if b[0] is not None else -np.inf for b in bounds],
+        [b[1] if b[1] is not None else np.inf for b in bounds],
+    )
+    constraints = [{"type": "ineq", "fun": problem.above, "jac": problem.above_jac}]
+    if len(problem.on_ground):
+        constraints.append({"type": "eq", "fun": problem.ground, "jac": problem.ground_jac})
+    try:
+        res = minimize(
+            problem.objective,
+            x0,
+            jac=problem.gradient,
+            bounds=bounds,
+            constraints=constraints,
+            method="SLSQP",
+            options={"maxiter": maxiter, "ftol": 1e-9},
+        )
+        x = res.x
+        # A feasible iterate is kept even at the iteration limit: it touches the ground as the
+        # base does, and is at least as close to Eq. 1's optimum as where it started.
+        ok = res.status in (0, 9) and bool(np.all(np.isfinite(x)))
+        if ok:
+            z = problem.above(x)
+            ok = z.min() > -TOLERANCE and (
+                not len(problem.on_ground) or np.abs(z[problem.on_ground]).max() < TOLERANCE
+            )
+    except (ValueError, np.linalg.LinAlgError):
+        ok = False
+    if ok:
+        return GroundFit(problem.qpos(x), "slsqp", problem.objective(x))
+    lifted = lift_to_ground(model, data, q0, sites, height)
+    return GroundFit(lifted, "lift", problem.objective(lifted[problem.qadr]))
