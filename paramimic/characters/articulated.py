@@ -269,10 +269,15 @@ def leg(
 
 
 def _biped_lower() -> BodyPlan:
-    kp = 500.0
+    kp = 1500.0
     hip = Part("hip", None, (0.2, 0.3, 0.15))
     torso = Part(
-        "torso", "hip", (0.22, 0.3, 0.35), (0.0, 0.0, 0.5), (0.0, 0.0, 0.5), ball("torso", kp, 300)
+        "torso",
+        "hip",
+        (0.22, 0.3, 0.35),
+        (0.0, 0.0, 0.5),
+        (0.0, 0.0, 0.5),
+        ball("torso", kp, 0.6 * kp),
     )
     legs = [
         leg(s, "hip", (0.0, y, -0.5), (0.1, 0.1, 0.42), (0.08, 0.08, 0.42), (0.22, 0.1, 0.05), kp)
@@ -288,7 +293,7 @@ def _biped_lower() -> BodyPlan:
 
 
 def _quadruped() -> BodyPlan:
-    kp = 400.0
+    kp = 1200.0
     trunk = Part("trunk", None, (0.8, 0.3, 0.2))
     head = Part(
         "head", "trunk", (0.2, 0.15, 0.15), (0.5, 0.0, 0.3), (0.5, 0.0, 0.2), ball("neck", 100, 60)

@@ -102,7 +102,7 @@ class _Problem:
 
     def ground(self, x: np.ndarray) -> np.ndarray:
         self._eval(x)
-        return self.points[self.on_ground, 2]
+        return self.points[self.on_ground, 2] - self.targets[self.on_ground, 2]
 
     def ground_jac(self, x: np.ndarray) -> np.ndarray:
         self._eval(x)
@@ -169,7 +169,7 @@ def fit_ground_contact(
         if ok:
             z = problem.above(x)
             ok = z.min() > -TOLERANCE and (
-                not len(problem.on_ground) or np.abs(z[problem.on_ground]).max() < TOLERANCE
+                not len(problem.on_ground) or np.abs(problem.ground(x)).max() < TOLERANCE
             )
     except (ValueError, np.linalg.LinAlgError):
         ok = False

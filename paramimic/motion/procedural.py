@@ -27,6 +27,10 @@ class SinusoidalMotion:
     amp2: np.ndarray  # [J] second harmonic
     phase: np.ndarray  # [J] phase shift in cycles
 
+    def rest_pose(self) -> np.ndarray:
+        """The mean pose of the cycle (the offsets): the posture a body stands or floats in."""
+        return self.offset.copy()
+
     def pose(self, phi: float) -> np.ndarray:
         x = TWO_PI * (phi + self.phase)
         return self.offset + self.amp1 * np.sin(x) + self.amp2 * np.sin(2.0 * x)
@@ -85,18 +89,19 @@ def _joint_names(character) -> tuple[str, ...]:
 
 
 # The lower-body biped walks like the planar walker: hip pitch, knee and ankle pitch per leg,
-# with a little hip roll shifting the weight over the stance leg.
+# with a little hip roll shifting the weight over the stance leg. The offsets (the mean pose)
+# stand with slightly bent knees and flat feet (hip + knee + ankle = 0).
 BIPED_LOWER_GAIT = _gait(
     _joint_names(BIPED_LOWER),
     1.0,
     {
-        "hip_r_pitch": (0.20, 0.32, 0.00, 0.00),
-        "knee_r": (-0.45, -0.35, 0.05, 0.25),
-        "ankle_r_pitch": (0.00, 0.15, 0.00, -0.10),
+        "hip_r_pitch": (0.10, 0.32, 0.00, 0.00),
+        "knee_r": (-0.20, -0.30, 0.05, 0.25),
+        "ankle_r_pitch": (0.10, 0.15, 0.00, -0.10),
         "hip_r_roll": (0.00, 0.04, 0.00, 0.25),
-        "hip_l_pitch": (0.20, 0.32, 0.00, 0.50),
-        "knee_l": (-0.45, -0.35, 0.05, 0.75),
-        "ankle_l_pitch": (0.00, 0.15, 0.00, 0.40),
+        "hip_l_pitch": (0.10, 0.32, 0.00, 0.50),
+        "knee_l": (-0.20, -0.30, 0.05, 0.75),
+        "ankle_l_pitch": (0.10, 0.15, 0.00, 0.40),
         "hip_l_roll": (0.00, 0.04, 0.00, 0.75),
     },
 )
@@ -106,9 +111,9 @@ def _trot() -> SinusoidalMotion:
     """A trot: diagonal legs (front-right with hind-left) swing together, half a cycle apart."""
     rows = {}
     for side, phase in (("fr", 0.0), ("hl", 0.0), ("fl", 0.5), ("hr", 0.5)):
-        rows[f"hip_{side}_pitch"] = (0.25, 0.30, 0.00, phase)
-        rows[f"knee_{side}"] = (-0.50, -0.30, 0.00, phase + 0.25)
-        rows[f"ankle_{side}_pitch"] = (0.25, 0.10, 0.00, phase - 0.10)
+        rows[f"hip_{side}_pitch"] = (0.10, 0.30, 0.00, phase)
+        rows[f"knee_{side}"] = (-0.20, -0.30, 0.00, phase + 0.25)
+        rows[f"ankle_{side}_pitch"] = (0.10, 0.10, 0.00, phase - 0.10)
     return _gait(_joint_names(QUADRUPED), 0.6, rows)
 
 

@@ -1,0 +1,83 @@
+"""Shape change on the fly ([WL19] §5.2): env.set_shape mid-episode."""
+
+import numpy as np
+import pytest
+
+from paramimic.envs import ParamEnv
+
+
+def _walk(env, steps, rng):
+    for _ in range(steps):
+        obs, r, terminated, truncated, info = env.step(
+            0.2 * rng.standard_normal(env.action_space.shape)
+        )
+        assert not (terminated or truncated)
+    return obs
+
+
+@pytest.mark.parametrize(
+    ("name", "task", "grow"),
+    [
+        (
+            "walker",
+            {"left_leg_length": (0.7, 1.3), "right_leg_length": (0.7, 1.3)},
+            {"left_leg_length": 1.3, "right_leg_length": 1.3},
+        ),
+        ("biped_lower", {"global_z": (0.5, 1.5)}, {"global_z": 1.5}),
+        (
+            "quadruped",
+            {"global_z": (0.5, 1.5), "global_x": (0.5, 1.5)},
+            {"global_z": 1.4, "global_x": 0.6},
+        ),
+    ],
+)
+def test_growing_limbs_mid_episode_lifts_the_body_and_keeps_the_state(name, task, grow):
+    env = ParamEnv(name, task, {"init_noise": 0.0})
+    center = {k: (lo + hi) / 2 for k, (lo, hi) in task.items()}
+    env.reset(seed=0, options={"task": {k: v * 0.8 for k, v in center.items()}})
+    rng = np.random.default_rng(0)
+    _walk(env, 3, rng)
+    before = env.data
+    joints = before.qpos[env.character.qpos_idx].copy()
+    joint_vel = before.qvel[env.character.qvel_idx].copy()
+    root_vel = before.qvel[:3].copy()
+    phase, steps = env._phase, env._steps
+    obs = env.set_shape(grow)
+    after = env.data
+    assert after is not before and env.character.shape != {}
+    # state continuity: joint angles and velocities, root velocity, phase, step count
+    np.testing.assert_array_equal(after.qpos[env.character.qpos_idx], joints)
+    np.testing.assert_array_equal(after.qvel[env.character.qvel_idx], joint_vel)
+    np.testing.assert_array_equal(after.qvel[:3], root_vel)
+    assert (env._phase, env._steps) == (phase, steps)
+    # the new shape is part of the task the policy observes
+    for k, v in grow.items():
+        assert env.task[env.task_space.names.index(k)] == v
+    np.testing.assert_allclose(obs[: env.task_space.dim], env.task, rtol=1e-6)
+    # no penetration deeper than 1 cm after the change
+    depth = max((-env.data.contact.dist[i] for i in range(env.data.ncon)), default=0.0)
+    assert depth < 0.01
+    # and the episode goes on under the policy's control, finite
+    _walk(env, 2, rng)
+    assert np.all(np.isfinite(env.data.qpos))
+
+
+def test_shrinking_keeps_the_average_com_velocity_continuous():
+    env = ParamEnv("walker", {"global_scale": (0.5, 1.5)}, {"init_noise": 0.0})
+    env.reset(seed=0, options={"task": [1.2]})
+    rng = np.random.default_rng(1)
+    _walk(env, 10, rng)
+    v = env._com_vel
+    env.set_shape({"global_scale": 0.8})
+    obs, *_ = env.step(np.zeros(env.action_space.shape))
+    # one control step later the 2-s average moved by a step's worth, not by the COM's jump
+    assert abs(env._com_vel[0] - v[0]) < 0.2
+
+
+def test_set_shape_rejects_parameters_outside_the_task():
+    env = ParamEnv("walker", {"global_scale": (0.5, 1.5)})
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="not a shape dimension"):
+        env.set_shape({"torso_length": 1.1})
+    with pytest.raises(ValueError, match="positive"):
+        env.set_shape({"global_scale": -1.0})
