@@ -250,6 +250,12 @@ class ExperimentConfig(Section):
     task: dict[str, tuple[float, float]] = Field(
         default_factory=dict, description="the task space A: name -> [min, max]"
     )
+    shape_space: Literal["task", "full"] = Field(
+        "task",
+        description="'full' adds every shape parameter of the character at its documented range "
+        "(b_g 0.5-1.5, b_l 0.7-1.2 for the [WL19] §5.3 characters) to the task space; "
+        "entries in `task` override single ranges",
+    )
     env: EnvConfig = EnvConfig()
     ppo: PPOConfig = PPOConfig()
     curriculum: CurriculumConfig = CurriculumConfig()
@@ -264,6 +270,18 @@ class ExperimentConfig(Section):
         if v not in CHARACTERS:
             raise ValueError(f"unknown character {v!r}; known: {sorted(CHARACTERS)}")
         return v
+
+    @model_validator(mode="after")
+    def _expand_shape_space(self) -> ExperimentConfig:
+        if self.shape_space == "full":
+            from paramimic.characters import CHARACTERS
+
+            params = getattr(CHARACTERS[self.character], "shape_params", ())
+            if not params:
+                raise ValueError(f"shape_space: {self.character!r} has no shape parameters")
+            full = {p.name: (p.low, p.high) for p in params}
+            object.__setattr__(self, "task", full | dict(self.task))
+        return self
 
     @model_validator(mode="after")
     def _valid_task(self) -> ExperimentConfig:

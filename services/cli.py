@@ -190,25 +190,21 @@ def evaluate_cmd(
         float | None, typer.Option(help="episode horizon (default: the config's)")
     ] = None,
     num_envs: Annotated[int, typer.Option(help="environments stepped together")] = 8,
+    heatmap: Annotated[
+        Path | None,
+        typer.Option(help="write a PNG heatmap of return over the two displayed task dims"),
+    ] = None,
 ) -> None:
     """Fall %, task achievement, returns and uniformity of a trained controller."""
     from paramimic.envs import make_env
     from paramimic.evaluation import deterministic, evaluate
-    from paramimic.rl.networks import ActorCritic
     from services.learner import checkpoint
 
     if episodes < 1 or grid < 1 or num_envs < 1:
         _fail("--episodes, --grid and --num-envs must be positive")
-    try:
-        state = checkpoint.load(run)
-    except FileNotFoundError as e:
-        _fail(str(e))
-    cfg = ExperimentConfig.model_validate(state["config"])
-    if seconds is not None:
-        cfg.env.max_episode_seconds = seconds
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
-    policy.load_state_dict(state["learner"]["policy"])
-    policy.eval()
+    if heatmap is not None and heatmap.suffix.lower() != ".png":
+        _fail(f"--heatmap must be a .png file, got {heatmap.name!r}")
+    cfg, policy, state = _load_policy(run, seconds)
     probe = make_env(cfg.character, cfg.task, cfg.env)
     report = evaluate(
         deterministic(policy),
@@ -245,6 +241,107 @@ def evaluate_cmd(
     )
     shown = {k: round(report[k], 3) for k in keys if k in report}
     console.print(shown | {"uniformity": report["uniformity"]})
+    if heatmap is not None:
+        from services.media import write_heatmap
+
+        if "grid" not in report:
+            _fail("the task space has fewer than two free dimensions: no heatmap")
+        title = f"{cfg.name}: return per task, {cfg.env.max_episode_seconds:g} s episodes"
+        console.print(f"wrote {write_heatmap(report['grid'], heatmap, title)}")
+
+
+def _load_policy(run: Path, seconds: float | None = None):
+    """(config, policy in eval mode, checkpoint state) of a run directory or checkpoint."""
+    from paramimic.rl.networks import ActorCritic
+    from services.learner import checkpoint
+
+    try:
+        state = checkpoint.load(run)
+    except FileNotFoundError as e:
+        _fail(str(e))
+    cfg = ExperimentConfig.model_validate(state["config"])
+    if seconds is not None:
+        cfg.env.max_episode_seconds = seconds
+    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy.load_state_dict(state["learner"]["policy"])
+    policy.eval()
+    return cfg, policy, state
+
+
+def _parse_shapes(text: str, names: tuple[str, ...]) -> list[dict[str, float]]:
+    """'a=1,b=0.8;a=1.2' -> [{a: 1, b: 0.8}, {a: 1.2}], names checked against the task."""
+    shapes = []
+    for chunk in filter(None, (c.strip() for c in text.split(";"))):
+        shape = {}
+        for item in chunk.split(","):
+            name, sep, value = item.partition("=")
+            name = name.strip()
+            if not sep or name not in names:
+                _fail(f"--shapes: {item!r} is not NAME=VALUE with NAME one of {list(names)}")
+            try:
+                shape[name] = float(value)
+            except ValueError:
+                _fail(f"--shapes: {value!r} is not a number")
+        shapes.append(shape)
+    if not shapes:
+        _fail("--shapes: give at least one shape, e.g. 'global_z=0.6;global_z=1.4'")
+    return shapes
+
+
+@app.command()
+def render(
+    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    shapes: Annotated[
+        str,
+        typer.Option(
+            help="bodies as task parameters, ';' between bodies: 'global_z=0.6;global_z=1.4' "
+            "(unnamed parameters sit at the center of the task space)"
+        ),
+    ],
+    out: Annotated[Path, typer.Option(help="family.gif or family.mp4")] = Path("family.gif"),
+    seconds: Annotated[float, typer.Option(help="length of the clip")] = 4.0,
+    width: Annotated[int, typer.Option(help="pixels per body")] = 320,
+    height: Annotated[int, typer.Option()] = 240,
+    morph: Annotated[
+        bool,
+        typer.Option(help="one body whose shape morphs along the given shapes ([WL19] §5.2)"),
+    ] = False,
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Render the controller on several bodies side by side, or one morphing body."""
+    from paramimic.render import render_family, render_morph, use_software_gl
+    from services.media import VIDEO_SUFFIXES, write_animation
+
+    if out.suffix.lower() not in VIDEO_SUFFIXES:
+        _fail(f"--out must end in one of {VIDEO_SUFFIXES}, got {out.name!r}")
+    if seconds <= 0 or width < 16 or height < 16:
+        _fail("--seconds must be positive and --width/--height at least 16")
+    use_software_gl()
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic
+
+    cfg, policy, _ = _load_policy(run, max(seconds, 1.0))
+    env = make_env(cfg.character, cfg.task, cfg.env)
+    space = env.task_space
+    bodies = _parse_shapes(shapes, space.names)
+    tasks = []
+    for shape in bodies:
+        a = space.center.copy()
+        for name, value in shape.items():
+            a[space.names.index(name)] = value
+        if not space.contains(a)[0]:
+            _fail(f"--shapes: {shape} is outside the task space {space.ranges()}")
+        tasks.append(a)
+    act = deterministic(policy)
+    if morph:
+        if len(bodies) < 2:
+            _fail("--morph needs at least two shapes to move between")
+        frames = render_morph(act, env, tasks[0], bodies, seconds, width, height, seed)
+    else:
+        maker = lambda: make_env(cfg.character, cfg.task, cfg.env)  # noqa: E731
+        frames = render_family(act, maker, tasks, seconds, width, height, seed)
+    path = write_animation(frames, out, fps=1.0 / env.dt)
+    console.print(f"wrote {path} ({len(frames)} frames, {frames[0].shape[1]}x{frames[0].shape[0]})")
 
 
 if __name__ == "__main__":

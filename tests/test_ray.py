@@ -177,8 +177,10 @@ def test_all_actors_gone_raises_after_the_timeout(distributed, tmp_path):
 
     cfg = _cfg(lost_timeout=2.0)
     trainer, backend = distributed(cfg, tmp_path)
+    # actors that start slower than lost_timeout join later: wait for both before killing them
+    assert backend.wait_for_actors(2, timeout=60.0) == 2
     for actor in backend.actors:
         ray.kill(actor, no_restart=True)
     with pytest.raises(AllActorsLost, match="no rollout actor delivered"):
-        trainer.train(backend, total_steps=10**6)
+        trainer.train(backend, total_steps=20 * cfg.ppo.num_steps)
     assert checkpoint.load(tmp_path)["progress"]["iteration"] == 0  # checkpointed on the way out

@@ -182,6 +182,13 @@ class RayBackend:
                         "node_id": node_id, "node_ip": node_ip})
                 )  # fmt: skip
 
+    def wait_for_actors(self, n: int, timeout: float) -> int:
+        """Admit joining actors until `n` are in the pool or `timeout` s pass; the pool size."""
+        deadline = time.monotonic() + timeout
+        while len(self.pool) < n and self.joining and time.monotonic() < deadline:
+            self._admit(timeout=min(1.0, max(0.0, deadline - time.monotonic())))
+        return len(self.pool)
+
     def _top_up(self) -> None:
         """Start actors up to the pool size (auto: the cluster's CPUs now); admit those up."""
         want = resolve_num_actors(self.cfg.actors.num_actors)

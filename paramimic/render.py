@@ -1,0 +1,146 @@
+"""Pictures of a parametric controller: one policy on several bodies side by side ([WL19]
+Fig. 1, 4), or one body whose shape morphs along a path while it moves (§5.2).
+
+Frames come from MuJoCo's offscreen renderer (`mujoco.Renderer`), which runs on a CPU through
+EGL with Mesa's software rasterizer (`MUJOCO_GL=egl`) or OSMesa (`MUJOCO_GL=osmesa`). A camera
+tracks each body's root from the side, at a distance that follows the body's size.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+
+import mujoco
+import numpy as np
+
+from paramimic.envs.param_env import ParamEnv
+
+Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
+
+
+def use_software_gl() -> None:
+    """Pick a headless OpenGL backend before MuJoCo creates a context (EGL unless set)."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
+        os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+
+class Camera:
+    """An offscreen renderer for one environment; rebuilt when the env's model changes (a
+    shape change compiles a new model)."""
+
+    def __init__(self, width: int, height: int) -> None:
+        self.width, self.height = width, height
+        self._renderer: mujoco.Renderer | None = None
+        self._model: mujoco.MjModel | None = None
+        self.camera = mujoco.MjvCamera()
+        self.camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+        self.camera.azimuth = 90.0  # looking at the body's left side (+y toward the camera)
+        self.camera.elevation = -12.0
+
+    def frame(self, env: ParamEnv) -> np.ndarray:
+        """The env's current state as an RGB image [height, width, 3] (uint8)."""
+        if env.model is not self._model:
+            self.close()
+            self._renderer = mujoco.Renderer(env.model, self.height, self.width)
+            self._model = env.model
+            self.camera.trackbodyid = env.character.root_body_id
+            self.camera.distance = 1.2 + 3.0 * env.character.hip_height
+            if getattr(env.definition, "swims", False):
+                self.camera.distance = 2.5 * _body_length(env.model)
+        assert self._renderer is not None
+        self._renderer.update_scene(env.data, self.camera)
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+            self._model = None
+
+
+def _body_length(model: mujoco.MjModel) -> float:
+    """Extent of the body's geoms along x, a swimmer's length."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    x = data.geom_xpos[:, 0]
+    return float(x.max() - x.min() + 2 * model.geom_size[:, 0].max())
+
+
+def render_family(
+    act: Act,
+    make_env: Callable[[], ParamEnv],
+    tasks: Sequence[np.ndarray],
+    seconds: float,
+    width: int = 320,
+    height: int = 240,
+    seed: int = 0,
+) -> list[np.ndarray]:
+    """One policy on each task's body, side by side: frames [height, width·n, 3] at the
+    control rate. A body whose episode ends (a fall) stays in its last frame."""
+    envs = [make_env() for _ in tasks]
+    cams = [Camera(width, height) for _ in tasks]
+    obs = np.stack(
+        [
+            e.reset(seed=seed + i, options={"task": t})[0]
+            for i, (e, t) in enumerate(zip(envs, tasks, strict=True))
+        ]
+    )
+    done = [False] * len(envs)
+    last = [c.frame(e) for c, e in zip(cams, envs, strict=True)]
+    frames = [np.concatenate(last, axis=1)]
+    for _ in range(int(round(seconds / envs[0].dt))):
+        actions = act(obs)
+        for i, env in enumerate(envs):
+            if done[i]:
+                continue
+            obs[i], _, terminated, truncated, _ = env.step(actions[i])
+            done[i] = terminated or truncated
+            last[i] = cams[i].frame(env)
+        frames.append(np.concatenate(last, axis=1))
+        if all(done):
+            break
+    for c in cams:
+        c.close()
+    return frames
+
+
+def morph_path(path: Sequence[dict[str, float]], t: float) -> dict[str, float]:
+    """Piecewise-linear interpolation along shapes `path` at t ∈ [0, 1]."""
+    if len(path) == 1:
+        return dict(path[0])
+    x = min(max(t, 0.0), 1.0) * (len(path) - 1)
+    k = min(int(x), len(path) - 2)
+    u = x - k
+    return {n: (1 - u) * path[k][n] + u * path[k + 1][n] for n in path[0]}
+
+
+def render_morph(
+    act: Act,
+    env: ParamEnv,
+    task: np.ndarray,
+    path: Sequence[dict[str, float]],
+    seconds: float,
+    width: int = 320,
+    height: int = 240,
+    seed: int = 0,
+) -> list[np.ndarray]:
+    """One body whose shape follows `path` over `seconds` ([WL19] §5.2): `set_shape` every
+    control step, the policy in control throughout. Ends early if the body falls."""
+    names = set(path[0])
+    if any(set(p) != names for p in path):
+        raise ValueError("every shape on a morph path must name the same parameters")
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    obs = env.set_shape(path[0])
+    cam = Camera(width, height)
+    frames = [cam.frame(env)]
+    steps = int(round(seconds / env.dt))
+    for i in range(steps):
+        obs = env.set_shape(morph_path(path, (i + 1) / steps))
+        obs, _, terminated, truncated, _ = env.step(act(obs[None])[0])
+        frames.append(cam.frame(env))
+        if terminated or truncated:
+            break
+    cam.close()
+    return frames
