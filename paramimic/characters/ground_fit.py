@@ -47,6 +47,7 @@ class _Problem:
         self.targets, self.sites, self.weight = targets, sites, weight
         self.qadr, self.dofs = qadr, dofs  # x -> qpos addresses and dof columns
         self.on_ground = np.flatnonzero(targets[:, 2] < ON_GROUND)
+        self.off_ground = np.flatnonzero(targets[:, 2] >= ON_GROUND)
         self._x: np.ndarray | None = None
         self._jac = np.zeros((3, model.nv))
         self.on_ground = self._independent(self.on_ground)
@@ -109,12 +110,15 @@ class _Problem:
         return self.jac[self.on_ground, 2, :]
 
     def above(self, x: np.ndarray) -> np.ndarray:
+        """Heights of the points the base has in the air: they must not go below the ground
+        (the on-ground ones are equality constraints; repeating them makes SLSQP's
+        linearized constraints incompatible)."""
         self._eval(x)
-        return self.points[:, 2]
+        return self.points[self.off_ground, 2]
 
     def above_jac(self, x: np.ndarray) -> np.ndarray:
         self._eval(x)
-        return self.jac[:, 2, :]
+        return self.jac[self.off_ground, 2, :]
 
 
 def fit_ground_contact(
@@ -126,7 +130,7 @@ def fit_ground_contact(
     height_joint: int,
     joints: np.ndarray,
     weight: float = W_Q,
-    maxiter: int = 100,
+    maxiter: int = 50,
 ) -> GroundFit:
     """Solve Eq. 1 by SLSQP from q0; `targets` [P, 3] are the base's contact points c̄ for the
     contact `sites` [P]; `height_joint` is the root's vertical DOF (a slide, or a free joint
@@ -149,7 +153,9 @@ def fit_ground_contact(
         [b[0] if b[0] is not None else -np.inf for b in bounds],
         [b[1] if b[1] is not None else np.inf for b in bounds],
     )
-    constraints = [{"type": "ineq", "fun": problem.above, "jac": problem.above_jac}]
+    constraints = []
+    if len(problem.off_ground):
+        constraints.append({"type": "ineq", "fun": problem.above, "jac": problem.above_jac})
     if len(problem.on_ground):
         constraints.append({"type": "eq", "fun": problem.ground, "jac": problem.ground_jac})
     try:
@@ -160,14 +166,15 @@ def fit_ground_contact(
             bounds=bounds,
             constraints=constraints,
             method="SLSQP",
-            options={"maxiter": maxiter, "ftol": 1e-9},
+            options={"maxiter": maxiter, "ftol": 1e-6},
         )
         x = res.x
         # A feasible iterate is kept even at the iteration limit: it touches the ground as the
         # base does, and is at least as close to Eq. 1's optimum as where it started.
         ok = res.status in (0, 9) and bool(np.all(np.isfinite(x)))
         if ok:
-            z = problem.above(x)
+            problem._eval(x)
+            z = problem.points[:, 2]
             ok = z.min() > -TOLERANCE and (
                 not len(problem.on_ground) or np.abs(problem.ground(x)).max() < TOLERANCE
             )

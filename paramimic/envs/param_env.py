@@ -277,7 +277,7 @@ class ParamEnv(gym.Env):
         if self._free:
             d.qvel[1] = self._target_vel[1]
         if len(c.contact_site_ids):
-            d.qpos[:] = self._on_ground(d.qpos.copy())
+            d.qpos[:] = self.ground_posture(d.qpos.copy())
             d.qpos[self._height_adr] += 1e-3
         d.ctrl[:] = d.qpos[c.qpos_idx]
         mujoco.mj_forward(m, d)
@@ -306,7 +306,7 @@ class ParamEnv(gym.Env):
         self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
         self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
 
-    def _on_ground(self, qpos: np.ndarray) -> np.ndarray:
+    def ground_posture(self, qpos: np.ndarray) -> np.ndarray:
         """The initial posture on the ground. A body other than the base is fitted by [WL19]
         Eq. 1 to the base body's contact points in the same pose; the base (or a failed fit)
         is moved vertically until its lowest foot point touches."""
