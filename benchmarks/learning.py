@@ -40,7 +40,13 @@ EVAL_SEED = 2024
 
 
 def _train_ours(
-    config: str, steps: int, overrides: dict, run_dir: Path, seed: int, on_ray: bool = False
+    config: str,
+    steps: int,
+    overrides: dict,
+    run_dir: Path,
+    seed: int,
+    on_ray: bool = False,
+    eval_seconds: float | None = None,
 ) -> dict:
     import torch
 
@@ -77,9 +83,12 @@ def _train_ours(
         backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
         trainer.train(backend, steps)
     train_seconds = time.perf_counter() - t0
+    env_cfg = cfg.env.model_copy(
+        update={"max_episode_seconds": eval_seconds or cfg.env.max_episode_seconds}
+    )
     report = evaluate(
         deterministic(trainer.learner.policy),
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        lambda: make_env(cfg.character, cfg.task, env_cfg),
         trainer.space,
         EVAL_EPISODES,
         EVAL_SEED,
