@@ -23,9 +23,11 @@ from paramimic.characters.body import (
     TIMESTEP,
     Character,
     Joint,
+    ShapeParam,
     add_sensors,
     add_servos,
     index_character,
+    shape_with_defaults,
 )
 from paramimic.motion.clip import ClipPose
 
@@ -34,7 +36,19 @@ DATA = resources.files("paramimic") / "data" / "deepmimic"
 KP = {"chest": 1000.0, "neck": 100.0, "hip": 500.0, "knee": 500.0, "ankle": 400.0}
 KP |= {"shoulder": 400.0, "elbow": 300.0}
 AXES = "xyz"
-EULER = "XYZ"  # intrinsic: the x hinge first, then y in the rotated frame, then z
+EULER = "XYZ"
+# [WL19] §5.1, Fig. 2: legs up to 2x longer or shorter, arms 1.5x longer or 2x shorter, height
+# 0.75-1.5x, every body 0.5-1.5x thicker
+SHAPE_PARAMS = (
+    ShapeParam("leg_length", 0.5, 2.0, "thigh and shin length"),
+    ShapeParam("arm_length", 0.5, 1.5, "upper and lower arm length"),
+    ShapeParam("height", 0.75, 1.5, "every length and width"),
+    ShapeParam("thickness", 0.5, 1.5, "every width (capsule and sphere radii, box width)"),
+)
+LEG, ARM = ("hip", "knee"), ("shoulder", "elbow")
+BASE_LEG = (
+    0.421546 + 0.40987
+)  # thigh + shin of the file  # intrinsic: the x hinge first, then y in the rotated frame, then z
 
 
 @dataclass(frozen=True)
@@ -46,12 +60,23 @@ class HumanoidDef:
     feet: tuple[str, ...] = ("right_ankle", "left_ankle")
     root: str = "root"
     fall_bodies: tuple[str, ...] = ("root", "chest", "neck")  # DeepMimic's EnableFallContact
+    shape_params: tuple[ShapeParam, ...] = SHAPE_PARAMS
 
     def param_names(self) -> tuple[str, ...]:
-        return ()
+        return tuple(p.name for p in self.shape_params)
 
     def default_shape(self) -> dict[str, float]:
-        return {}
+        return dict.fromkeys(self.param_names(), 1.0)
+
+    @staticmethod
+    def limb_scale(name: str, shape: dict[str, float]) -> float:
+        """Length scale along a body's own limb axis: height x leg or arm length."""
+        limb = 1.0
+        if name.endswith(LEG):
+            limb = shape["leg_length"]
+        elif name.endswith(ARM):
+            limb = shape["arm_length"]
+        return shape["height"] * limb
 
     @cached_property
     def description(self) -> dict:
@@ -86,14 +111,17 @@ class HumanoidDef:
         return tuple(j["Name"] for j in self.skeleton if j["Type"] == "revolute")
 
     def compile(self, shape: dict[str, float] | None = None) -> Character:
-        if shape:
-            raise KeyError(f"character {self.name!r} has no shape parameters, got {sorted(shape)}")
-        spec = self.spec()
-        model = spec.compile()
-        legs = np.array([0.421546 + 0.40987] * 2)  # thigh + shin of the file
-        return index_character(self, {}, model, legs, float(legs[0] + 0.05), {})
+        shape = shape_with_defaults(self, shape)
+        model = self.spec(shape).compile()
+        legs = np.full(2, BASE_LEG * shape["height"] * shape["leg_length"])
+        foot = 0.05 * shape["height"]
+        return index_character(self, shape, model, legs, float(legs[0] + foot), {})
 
-    def spec(self) -> mujoco.MjSpec:
+    def spec(self, shape: dict[str, float] | None = None) -> mujoco.MjSpec:
+        """The humanoid with shape b: joint offsets along a limb scale with that limb's length
+        (the file's bodies hang along their local y), shapes scale in length and thickness, and
+        masses follow the shapes' volumes."""
+        shape = shape_with_defaults(self, shape)
         spec = mujoco.MjSpec()
         spec.modelname = self.name
         spec.compiler.degree = False
@@ -110,7 +138,10 @@ class HumanoidDef:
         bodies: dict[int, mujoco.MjsBody] = {}
         for j in self.skeleton:
             parent = spec.worldbody if j["Parent"] < 0 else bodies[j["Parent"]]
-            pos = [j["AttachX"], j["AttachY"], j["AttachZ"]]
+            along = 1.0
+            if j["Parent"] >= 0:
+                along = self.limb_scale(self.skeleton[j["Parent"]]["Name"], shape)
+            pos = (np.array([j["AttachX"], j["AttachY"], j["AttachZ"]]) * along).tolist()
             body = parent.add_body(name=j["Name"], pos=pos)
             bodies[j["ID"]] = body
             if j["Parent"] < 0:
@@ -132,9 +163,11 @@ class HumanoidDef:
                     limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                     armature=0.01,
                 )
-            _add_shape(body, shapes[j["Name"]])
+            length = self.limb_scale(j["Name"], shape)
+            width = shape["height"] * shape["thickness"]
+            b = _scaled_shape(shapes[j["Name"]], length, width, shape["height"])
+            _add_shape(body, b)
             if j["Name"] in self.end_effectors:
-                b = shapes[j["Name"]]
                 body.add_site(name=f"{j['Name']}_end", pos=[b["AttachX"], b["AttachY"], 0])
         add_servos(spec, self.joints)
         add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
@@ -146,7 +179,8 @@ class HumanoidDef:
         model = character.model
         n = len(pose.root_position)
         qpos = np.zeros((n, model.nq))
-        qpos[:, 0:3] = pose.root_position
+        # the clip's root path scaled by the body's hip height (a simple retargeting)
+        qpos[:, 0:3] = pose.root_position * (character.hip_height / (BASE_LEG + 0.05))
         qpos[:, 3:7] = Rotation.from_quat(pose.root_quat).as_quat(scalar_first=True)
         for s, name in enumerate(self.spherical):
             angles = Rotation.from_quat(pose.spherical[:, s]).as_euler(EULER)
@@ -155,6 +189,36 @@ class HumanoidDef:
         for r, name in enumerate(self.revolute):
             qpos[:, model.jnt_qposadr[model.joint(name).id]] = pose.revolute[:, r]
         return qpos
+
+
+def _volume(b: dict) -> float:
+    if b["Shape"] == "sphere":
+        return np.pi / 6 * b["Param0"] ** 3
+    if b["Shape"] == "capsule":
+        r = b["Param0"] / 2
+        return np.pi * r**2 * b["Param1"] + 4 / 3 * np.pi * r**3
+    return b["Param0"] * b["Param1"] * b["Param2"]
+
+
+def _scaled_shape(b: dict, length: float, width: float, height: float) -> dict:
+    """A body shape of the file scaled: capsules along y by `length`, radii by `width`;
+    spheres by `width`; boxes (feet) by `height`, their height and width by `width`. The
+    shape's center moves with the length; mass x volume ratio (one density per body)."""
+    out = dict(b)
+    if b["Shape"] == "capsule":
+        out |= {"Param0": b["Param0"] * width, "Param1": b["Param1"] * length}
+        out |= {"Param2": b["Param2"] * width}
+        center = np.array([b["AttachX"], b["AttachY"] * length, b["AttachZ"]])
+    elif b["Shape"] == "sphere":
+        out |= {k: b[k] * width for k in ("Param0", "Param1", "Param2")}
+        center = np.array([b["AttachX"], b["AttachY"], b["AttachZ"]]) * length
+    else:
+        out |= {"Param0": b["Param0"] * height, "Param1": b["Param1"] * width}
+        out |= {"Param2": b["Param2"] * width}
+        center = np.array([b["AttachX"] * height, b["AttachY"] * width, b["AttachZ"]])
+    out["AttachX"], out["AttachY"], out["AttachZ"] = center.tolist()
+    out["Mass"] = float(b["Mass"]) * _volume(out) / _volume(b)
+    return out
 
 
 def _add_shape(body: mujoco.MjsBody, b: dict) -> None:
