@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 CONFIG ?= configs/walker_legs.yaml
 
-.PHONY: train test lint bench clean
+.PHONY: train test lint bench clean gl
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -22,7 +22,15 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 train: $(VENV)/.installed
 	$(BIN)/paramimic train $(CONFIG)
 
-test: $(VENV)/.installed-test
+# MuJoCo's offscreen renderer (paramimic render, its tests) needs EGL with Mesa's software
+# renderer: installed with apt when missing and we are root.
+gl:
+	@ldconfig -p | grep -q libEGL_mesa || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    apt-get update -qq && apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri; \
+	  else echo "warning: no Mesa EGL (apt install libegl1 libegl-mesa0 libgl1-mesa-dri)"; fi; }
+
+test: $(VENV)/.installed-test gl
 	$(BIN)/ruff check paramimic services tests benchmarks
 	$(BIN)/python -m pytest tests
 
@@ -33,6 +41,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/throughput.py
 	$(BIN)/python benchmarks/sampler.py
 	$(BIN)/python benchmarks/scaling.py
+	$(BIN)/python benchmarks/normalization.py all
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
