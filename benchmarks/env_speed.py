@@ -4,7 +4,8 @@ Both loops replay the same control sequence from the same state, so the physics 
 identical (same contacts); the difference is ParamEnv's own cost: reference lookup, sensors,
 reward, observation, termination and info. Reported for each shipped character, plus
 ParamEnv with episode resets (which rebuild the body for a new shape) for a task space with
-shape parameters. Target: ParamEnv >= 0.85x raw. Writes benchmarks/results/env_speed.json.
+shape parameters (each reset fits the new body to the ground, [WL19] Eq. 1). Target: ParamEnv
+>= 0.85x raw. Writes benchmarks/results/env_speed.json.
 
     python benchmarks/env_speed.py [--steps 3000] [--repeats 5]
 """
@@ -27,6 +28,10 @@ warnings.filterwarnings("ignore")
 CASES = {
     "walker": ("walker", {"target_velocity": (1.0, 1.0)}),
     "hopper": ("hopper", {"target_velocity": (1.0, 1.0)}),
+    "biped_lower": ("biped_lower", {"target_velocity": (1.0, 1.0)}),
+    "quadruped": ("quadruped", {"target_velocity": (1.0, 1.0)}),
+    "fish": ("fish", {"target_velocity": (0.3, 0.3)}),
+    "manta": ("manta", {"target_velocity": (0.3, 0.3)}),
 }
 
 
@@ -112,7 +117,7 @@ def main() -> None:
     for name in CASES:
         r = results[name]
         print(
-            f"{name:8s} ParamEnv {r['paramenv_steps_per_s']:8.0f} steps/s   raw "
+            f"{name:12s} ParamEnv {r['paramenv_steps_per_s']:8.0f} steps/s   raw "
             f"{r['raw_mj_step_steps_per_s']:8.0f} steps/s   ratio {r['ratio']:.3f}"
         )
     r = results["walker_legs_with_resets"]
