@@ -6,7 +6,7 @@ for --steps each (serial, the same seed), then evaluate each controller on 300 r
 with a 30 s horizon: task achievement (mean cumulative task reward, Eq. 6 share of the reward,
 each under its own reward function as in the paper) and fall-down % within 30 s. Also the mean
 forward speed. Runs two trainings at a time (2 cores); writes
-benchmarks/results/normalization_<character>_<rn|no_rn>_s<seed>.json and the summary
+benchmarks/results/normalization_<character>_<rn|no_rn>_<steps>k_s<seed>.json and the summary
 benchmarks/results/normalization.json.
 
     python benchmarks/normalization.py all [--steps 1000000] [--seed 0]
@@ -48,8 +48,10 @@ def run_stage(stage: str, steps: int, seed: int) -> dict:
         eval_seconds=EVAL_SECONDS,
     )
     report.update({"stage": stage, "character": character, "normalize": normalize, "seed": seed})
+    report["budget_steps"] = steps
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"normalization_{stage}_s{seed}.json").write_text(json.dumps(report, indent=2))
+    name = f"normalization_{stage}_{steps // 1000}k_s{seed}.json"
+    (RESULTS / name).write_text(json.dumps(report, indent=2))
     return report
 
 
@@ -57,7 +59,8 @@ def merge() -> dict:
     table = {}
     for path in sorted(RESULTS.glob("normalization_*_s*.json")):
         r = json.loads(path.read_text())
-        table[f"{r['stage']}_s{r['seed']}"] = {
+        budget = r.get("budget_steps") or round(r["env_steps"], -5)
+        table[f"{r['stage']}_{budget // 1000}k_s{r['seed']}"] = {
             "character": r["character"],
             "reward_normalization": r["normalize"],
             "seed": r["seed"],
