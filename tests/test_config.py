@@ -29,6 +29,9 @@ def _write(tmp_path, text):
         ("task: {arm_length: [0.8, 1.2]}", "task.arm_length", "not a parameter of 'walker'"),
         ("curriculum: {k: -1}", "curriculum.k", "greater than or equal to 0"),
         ("name: my run", "name", "should match pattern"),  # it starts the Redis run id
+        # [WL19] §5.3: a planar body has no heading; the shape space is 'task' or 'full'
+        ("task: {target_direction: [0, 1]}", "(config)", "sagittal plane only"),
+        ("shape_space: all", "shape_space", "Input should be 'task' or 'full'"),
         # [L21] skill configs
         ("character: humanoid", "(config)", "no [WL19] gait; set env.clip"),
         ("env: {clip: humanoid_jump}", "(config)", "does not fit character 'walker'"),
