@@ -129,3 +129,19 @@ def test_reset_fits_new_bodies_to_the_ground():
         z = _contacts(c, mujoco.MjData(c.model), fitted)[:, 2]
         assert z.min() > -5e-3
         assert np.abs(z[on_ground]).max() < 5e-3
+
+
+def test_fit_is_bit_identical_whatever_the_process_blas_threads():
+    """A Ray worker runs BLAS on one thread, the learner on all cores; the fit must not care."""
+    from threadpoolctl import threadpool_limits
+
+    env = ParamEnv("hopper", {"leg_length": (0.8, 1.2), "target_velocity": (1.0, 1.0)})
+
+    def postures():
+        return np.array([(env.reset(seed=s), env.data.qpos.copy())[1] for s in range(20)])
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        one = postures()
+    with threadpool_limits(limits=2, user_api="blas"):
+        two = postures()
+    assert one.tobytes() == two.tobytes()

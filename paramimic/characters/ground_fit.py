@@ -16,6 +16,12 @@ import mujoco
 import numpy as np
 from scipy.linalg import qr
 from scipy.optimize import minimize
+from threadpoolctl import ThreadpoolController
+
+# SLSQP and the QR run in scipy's BLAS, whose sums change in the last bit with its thread
+# count; these problems are tiny, so one thread makes a fit identical in every process
+# (the learner's and a Ray worker's, which runs with one).
+_BLAS = ThreadpoolController()
 
 W_Q = 0.01  # w_q: posture regularizer weight
 ON_GROUND = 2e-3  # m: a base contact point this low is on the ground
@@ -136,6 +142,11 @@ def fit_ground_contact(
     contact `sites` [P]; `height_joint` is the root's vertical DOF (a slide, or a free joint
     whose third coordinate is the height), `joints` the actuated hinge joint ids. Falls back to
     `lift_to_ground` when SLSQP fails or leaves a ground point off by more than 1 mm."""
+    with _BLAS.limit(limits=1, user_api="blas"):
+        return _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter)
+
+
+def _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter) -> GroundFit:
     targets = np.asarray(targets, dtype=np.float64)
     sites = np.asarray(sites)
     joints = np.asarray(joints)
