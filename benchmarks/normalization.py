@@ -17,6 +17,12 @@ full ranges nothing learns to stay up in that budget (measured: 100 % falls both
     python benchmarks/normalization.py biped_lower_rn --steps 200000   # one stage
     python benchmarks/normalization.py quadruped_rn quadruped_no_rn --shape-scale 0.25
     python benchmarks/normalization.py merge
+    python benchmarks/normalization.py open-loop   # why balance comes first (no training)
+
+`open-loop` runs the reference motion with zero action (the PD servos track the sinusoidal gait,
+no policy) on random bodies at shape scales 0, 0.25, 0.5 and 1 (30 episodes of the config's
+horizon each), and on bodies where only one segment varies (scale 0.25, 10 episodes per
+segment): fall % and mean episode length, in benchmarks/results/normalization_open_loop.json.
 """
 
 from __future__ import annotations
@@ -38,14 +44,19 @@ STAGES = tuple(f"{c}_{rn}" for c in CHARACTERS for rn in ("rn", "no_rn"))
 EVAL_SECONDS = 30.0  # fall-down within 30 s ([WL19] §5 Table 4)
 
 
-def shrunk_shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
-    """Task overrides: every shape range of the character shrunk toward 1 by `scale`."""
+def shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
+    """Every shape range of the character shrunk toward 1 by `scale`."""
     from paramimic.characters import CHARACTERS
 
     return {
-        f"task.{p.name}": [1 - scale * (1 - p.low), 1 + scale * (p.high - 1)]
+        p.name: [1 - scale * (1 - p.low), 1 + scale * (p.high - 1)]
         for p in CHARACTERS[character].shape_params
     }
+
+
+def shrunk_shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
+    """Config overrides putting the shrunk shape ranges in the task space."""
+    return {f"task.{name}": r for name, r in shape_ranges(character, scale).items()}
 
 
 def run_stage(stage: str, steps: int, seed: int, shape_scale: float = 1.0) -> dict:
@@ -67,6 +78,54 @@ def run_stage(stage: str, steps: int, seed: int, shape_scale: float = 1.0) -> di
     name = f"normalization_{stage}_{steps // 1000}k_s{seed}{suffix}.json"
     (RESULTS / name).write_text(json.dumps(report, indent=2))
     return report
+
+
+def _zero_action_episodes(character: str, task: dict, episodes: int) -> dict:
+    import numpy as np
+
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+
+    cfg = load_config(ROOT / "configs" / f"{character}.yaml")
+    env = make_env(cfg.character, task, cfg.env)
+    zero = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    lengths, falls = [], 0
+    for episode in range(episodes):
+        env.reset(seed=episode)
+        steps, terminated, truncated = 0, False, False
+        while not (terminated or truncated):
+            _, _, terminated, truncated, _ = env.step(zero)
+            steps += 1
+        lengths.append(steps * env.dt)
+        falls += bool(terminated)
+    return {
+        "episodes": episodes,
+        "fall_percent": 100.0 * falls / episodes,
+        "mean_length_seconds": float(np.mean(lengths)),
+    }
+
+
+def open_loop(scales=(0.0, 0.25, 0.5, 1.0), segment_scale: float = 0.25) -> dict:
+    """Zero-action episodes: how often the reference gait alone keeps random bodies up."""
+    from paramimic.config import load_config
+
+    out: dict = {"scales": {}, "one_segment": {"shape_scale": segment_scale}}
+    for character in CHARACTERS:
+        task = load_config(ROOT / "configs" / f"{character}.yaml").task
+        goals = {k: v for k, v in task.items() if k not in shape_ranges(character, 1.0)}
+        for scale in scales:
+            result = _zero_action_episodes(character, goals | shape_ranges(character, scale), 30)
+            out["scales"][f"{character}_x{scale:g}"] = result
+            print(character, f"x{scale:g}", result, flush=True)
+        shape = shape_ranges(character, segment_scale)
+        for segment in sorted({name.rsplit("_", 1)[0] for name in shape}):
+            one = {k: v if k.rsplit("_", 1)[0] == segment else [1.0, 1.0] for k, v in shape.items()}
+            result = _zero_action_episodes(character, goals | one, 10)
+            out["one_segment"][f"{character}_{segment}"] = result
+            print(character, segment, result, flush=True)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "normalization_open_loop.json").write_text(json.dumps(out, indent=2))
+    return out
 
 
 def merge() -> dict:
@@ -97,7 +156,7 @@ def merge() -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("stages", nargs="+", choices=[*STAGES, "all", "merge"])
+    ap.add_argument("stages", nargs="+", choices=[*STAGES, "all", "merge", "open-loop"])
     ap.add_argument("--steps", type=int, default=1_000_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shape-scale", type=float, default=1.0, help="shrink the shape ranges")
@@ -105,6 +164,9 @@ def main() -> None:
     args = ap.parse_args()
     if not 0 <= args.shape_scale <= 1:
         ap.error("--shape-scale must be in [0, 1]")
+    if "open-loop" in args.stages:
+        open_loop()
+        return
     stages = STAGES if "all" in args.stages else [s for s in args.stages if s != "merge"]
     if len(stages) == 1:
         run_stage(stages[0], args.steps, args.seed, args.shape_scale)
