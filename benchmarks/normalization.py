@@ -6,7 +6,7 @@ for --steps each (serial, the same seed), then evaluate each controller on 300 r
 with a 30 s horizon: task achievement (mean cumulative task reward, Eq. 6 share of the reward,
 each under its own reward function as in the paper) and fall-down % within 30 s. Also the mean
 forward speed. Runs two trainings at a time (2 cores); writes
-benchmarks/results/normalization_<character>_<rn|no_rn>_<steps>k_s<seed>[_x<scale>].json and
+benchmarks/results/normalization_<character>_<rn|no_rn>_<steps>k_s<seed>[_x<scale>][_ppo-<preset>].json and
 the summary benchmarks/results/normalization.json.
 
 --shape-scale s < 1 shrinks every shape range toward the base body (lo' = 1 - s(1 - lo),
@@ -18,6 +18,10 @@ full ranges nothing learns to stay up in that budget (measured: 100 % falls both
     python benchmarks/normalization.py quadruped_rn quadruped_no_rn --shape-scale 0.25
     python benchmarks/normalization.py merge
     python benchmarks/normalization.py open-loop   # why balance comes first (no training)
+    python benchmarks/normalization.py biped_lower_rn --shape-scale 0.25 --ppo wl19
+
+--ppo wl19 trains with [WL19] Table 2's PPO step sizes (policy 5e-5, value 1e-4, minibatches of
+128) instead of the configs' (2e-4, 1e-3, 512); results get a _ppo-wl19 suffix.
 
 `open-loop` runs the reference motion with zero action (the PD servos track the sinusoidal gait,
 no policy) on random bodies at shape scales 0, 0.25, 0.5 and 1 (30 episodes of the config's
@@ -42,6 +46,11 @@ from learning import RESULTS, ROOT, _train_ours  # noqa: E402
 CHARACTERS = ("biped_lower", "quadruped")
 STAGES = tuple(f"{c}_{rn}" for c in CHARACTERS for rn in ("rn", "no_rn"))
 EVAL_SECONDS = 30.0  # fall-down within 30 s ([WL19] §5 Table 4)
+# --ppo presets: the configs' PPO (the [L21] §7 learning rates, n = 512) or [WL19] Table 2's
+PPO_PRESETS = {
+    "config": {},
+    "wl19": {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128},
+}
 
 
 def shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
@@ -59,25 +68,31 @@ def shrunk_shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
     return {f"task.{name}": r for name, r in shape_ranges(character, scale).items()}
 
 
-def run_stage(stage: str, steps: int, seed: int, shape_scale: float = 1.0) -> dict:
+def run_stage(
+    stage: str, steps: int, seed: int, shape_scale: float = 1.0, ppo: str = "config"
+) -> dict:
     warnings.filterwarnings("ignore")
     normalize = not stage.endswith("_no_rn")
     character = stage.removesuffix("_no_rn" if not normalize else "_rn")
-    suffix = "" if shape_scale == 1.0 else f"_x{shape_scale:g}"
+    suffix = ("" if shape_scale == 1.0 else f"_x{shape_scale:g}") + _ppo_suffix(ppo)
     run_dir = ROOT / "runs" / "bench" / f"normalization_{stage}_s{seed}{suffix}"
     shutil.rmtree(run_dir, ignore_errors=True)
-    overrides = {"env.reward.normalize": normalize}
+    overrides = {"env.reward.normalize": normalize} | PPO_PRESETS[ppo]
     if shape_scale != 1.0:
         overrides |= shrunk_shape_ranges(character, shape_scale)
     report = _train_ours(
         f"configs/{character}.yaml", steps, overrides, run_dir, seed, eval_seconds=EVAL_SECONDS
     )
     report.update({"stage": stage, "character": character, "normalize": normalize, "seed": seed})
-    report.update({"budget_steps": steps, "shape_scale": shape_scale})
+    report.update({"budget_steps": steps, "shape_scale": shape_scale, "ppo": ppo})
     RESULTS.mkdir(parents=True, exist_ok=True)
     name = f"normalization_{stage}_{steps // 1000}k_s{seed}{suffix}.json"
     (RESULTS / name).write_text(json.dumps(report, indent=2))
     return report
+
+
+def _ppo_suffix(ppo: str) -> str:
+    return "" if ppo == "config" else f"_ppo-{ppo}"
 
 
 def _zero_action_episodes(character: str, task: dict, episodes: int) -> dict:
@@ -134,10 +149,12 @@ def merge() -> dict:
         r = json.loads(path.read_text())
         budget = r.get("budget_steps") or round(r["env_steps"], -5)
         scale = r.get("shape_scale", 1.0)
-        suffix = "" if scale == 1.0 else f"_x{scale:g}"
+        ppo = r.get("ppo", "config")
+        suffix = ("" if scale == 1.0 else f"_x{scale:g}") + _ppo_suffix(ppo)
         table[f"{r['stage']}_{budget // 1000}k_s{r['seed']}{suffix}"] = {
             "character": r["character"],
             "shape_scale": scale,
+            "ppo": ppo,
             "reward_normalization": r["normalize"],
             "seed": r["seed"],
             "env_steps": r["env_steps"],
@@ -161,6 +178,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shape-scale", type=float, default=1.0, help="shrink the shape ranges")
     ap.add_argument("--parallel", type=int, default=2)
+    ap.add_argument("--ppo", choices=sorted(PPO_PRESETS), default="config", help="PPO preset")
     args = ap.parse_args()
     if not 0 <= args.shape_scale <= 1:
         ap.error("--shape-scale must be in [0, 1]")
@@ -169,12 +187,13 @@ def main() -> None:
         return
     stages = STAGES if "all" in args.stages else [s for s in args.stages if s != "merge"]
     if len(stages) == 1:
-        run_stage(stages[0], args.steps, args.seed, args.shape_scale)
+        run_stage(stages[0], args.steps, args.seed, args.shape_scale, args.ppo)
     elif stages:
 
         def sub(stage: str) -> int:
             cmd = [sys.executable, __file__, stage, "--steps", str(args.steps)]
             cmd += ["--seed", str(args.seed), "--shape-scale", str(args.shape_scale)]
+            cmd += ["--ppo", args.ppo]
             return subprocess.call(cmd)
 
         with ThreadPoolExecutor(args.parallel) as pool:
