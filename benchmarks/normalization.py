@@ -5,9 +5,9 @@ its [WL19] §5.3 range, target speed 1 m/s, adaptive shape sampling), train with
 for --steps each (serial, the same seed), then evaluate each controller on 300 random shapes
 with a 30 s horizon: task achievement (mean cumulative task reward, Eq. 6 share of the reward,
 each under its own reward function as in the paper) and fall-down % within 30 s. Also the mean
-forward speed. Runs two trainings at a time (2 cores); writes
-benchmarks/results/normalization_<character>_<rn|no_rn>_<steps>k_s<seed>[_x<scale>][_ppo-<preset>].json and
-the summary benchmarks/results/normalization.json.
+forward speed. Runs two trainings at a time (2 cores); writes benchmarks/results/
+normalization_<character>_<rn|no_rn>_<steps>k_s<seed>[_x<scale>][_ppo-<preset>].json and the
+summary benchmarks/results/normalization.json.
 
 --shape-scale s < 1 shrinks every shape range toward the base body (lo' = 1 - s(1 - lo),
 hi' = 1 + s(hi - 1)): the paper trains for 50-100M transitions, a laptop for ~1M, and at the
