@@ -55,11 +55,11 @@ PPO_PRESETS = {
 
 def shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
     """Every shape range of the character shrunk toward 1 by `scale`."""
-    from paramimic.characters import CHARACTERS
+    from paramimic.characters import get_character
 
     return {
         p.name: [1 - scale * (1 - p.low), 1 + scale * (p.high - 1)]
-        for p in CHARACTERS[character].shape_params
+        for p in get_character(character).shape_params
     }
 
 

@@ -22,12 +22,14 @@ TASK_GOALS = {
     "gravity": "gravity as a multiple of 9.81 m/s² (skill env)",
     "jump_height": "peak rise of the COM above its standing height (m, skill env)",
 }
-# Characters with a procedural [WL19] gait (ParamEnv); the others imitate clips (SkillEnv)
-GAITS = ("walker", "hopper", "biped_lower", "quadruped", "fish", "manta")
-PLANAR = ("walker", "hopper")  # sagittal-plane bodies: no target direction
-# Reference clips of the skill env, by name -> the characters they fit
-CLIPS = {"planar_jump": ("walker", "hopper"), "humanoid_jump": ("humanoid",)}
-CLIPS |= {f"humanoid_{n}": ("humanoid",) for n in ("walk", "run", "backflip", "cartwheel")}
+
+
+def _registry():
+    """The character registry (`paramimic.characters`), imported when a config is validated:
+    it loads MuJoCo, which the bare config models do not need."""
+    from paramimic import characters
+
+    return characters
 
 
 class Section(BaseModel):
@@ -265,18 +267,15 @@ class ExperimentConfig(Section):
     @field_validator("character")
     @classmethod
     def _known_character(cls, v: str) -> str:
-        from paramimic.characters import CHARACTERS
-
-        if v not in CHARACTERS:
-            raise ValueError(f"unknown character {v!r}; known: {sorted(CHARACTERS)}")
+        known = _registry().REGISTRY
+        if v not in known:
+            raise ValueError(f"unknown character {v!r}; known: {sorted(known)}")
         return v
 
     @model_validator(mode="after")
     def _expand_shape_space(self) -> ExperimentConfig:
         if self.shape_space == "full":
-            from paramimic.characters import CHARACTERS
-
-            params = getattr(CHARACTERS[self.character], "shape_params", ())
+            params = _registry().get_character(self.character).shape_params
             if not params:
                 raise ValueError(f"shape_space: {self.character!r} has no shape parameters")
             full = {p.name: (p.low, p.high) for p in params}
@@ -285,9 +284,9 @@ class ExperimentConfig(Section):
 
     @model_validator(mode="after")
     def _valid_task(self) -> ExperimentConfig:
-        from paramimic.characters import CHARACTERS
-
-        allowed = set(CHARACTERS[self.character].param_names()) | set(TASK_GOALS)
+        registration = _registry().registration(self.character)
+        character = registration.character
+        allowed = set(character.param_names()) | set(TASK_GOALS)
         for name, (lo, hi) in self.task.items():
             if name not in allowed:
                 raise ValueError(
@@ -301,17 +300,18 @@ class ExperimentConfig(Section):
             if lo <= 0:
                 raise ValueError(f"task.{name}: scales must be positive, got min {lo}")
         clip = self.env.clip
-        if clip is not None and self.character not in CLIPS.get(clip, ()):
+        if clip is not None and clip not in registration.clips:
+            owners = _registry().clip_owners()
             raise ValueError(
                 f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
-                + ", ".join(f"{k} ({'/'.join(v)})" for k, v in CLIPS.items())
+                + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
             )
-        if clip is None and self.character not in GAITS:
+        if clip is None and registration.gait is None:
             raise ValueError(
                 f"character {self.character!r} has no [WL19] gait; set env.clip "
-                f"(one of {sorted(k for k, v in CLIPS.items() if self.character in v)})"
+                f"(one of {sorted(registration.clips)})"
             )
-        if "target_direction" in self.task and self.character in PLANAR:
+        if "target_direction" in self.task and character.planar:
             raise ValueError(
                 f"task.target_direction: {self.character!r} moves in the sagittal plane only"
             )

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from paramimic.curriculum.task_space import TaskSpace
 from paramimic.envs import ParamEnv
 from paramimic.rl.networks import ActorCritic, NumpyPolicy
+from paramimic.task_space import TaskSpace
 
 
 @dataclass

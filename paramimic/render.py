@@ -47,7 +47,7 @@ class Camera:
             self._model = env.model
             self.camera.trackbodyid = env.character.root_body_id
             self.camera.distance = 1.2 + 3.0 * env.character.hip_height
-            if getattr(env.definition, "swims", False):
+            if env.definition.swims:
                 self.camera.distance = 2.5 * _body_length(env.model)
         assert self._renderer is not None
         self._renderer.update_scene(env.data, self.camera)

@@ -60,13 +60,23 @@ def api_url(redis_server, tmp_path_factory):
     api.stop()
 
 
-def _wait_until(predicate, timeout: float, what: str, every: float = 1.0):
-    """Call `predicate` until it returns something truthy (returned) or `timeout` s pass."""
+def wait_until(
+    predicate,
+    timeout: float = 120.0,
+    what: str = "a condition",
+    every: float = 0.2,
+    retry_on: tuple[type[BaseException], ...] = (),
+):
+    """Call `predicate` until it returns something truthy (returned) or `timeout` s pass; the
+    exceptions in `retry_on` count as not yet. The one poll loop of the tests."""
     import time
 
     deadline = time.monotonic() + timeout
     while True:
-        value = predicate()
+        try:
+            value = predicate()
+        except retry_on:
+            value = None
         if value:
             return value
         if time.monotonic() > deadline:
@@ -74,7 +84,7 @@ def _wait_until(predicate, timeout: float, what: str, every: float = 1.0):
         time.sleep(every)
 
 
-@pytest.fixture
-def wait_until():
-    """`wait_until(predicate, timeout, what)`: poll until truthy, fail naming `what`."""
-    return _wait_until
+@pytest.fixture(name="wait_until")
+def wait_until_fixture():
+    """`wait_until(predicate, timeout, what)` as a fixture."""
+    return wait_until

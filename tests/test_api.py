@@ -13,6 +13,7 @@ import pytest
 from conftest import API_TOKEN as TOKEN
 
 from paramimic.config import ExperimentConfig
+from paramimic.envs.skill_env import clip_setup
 from services.launch.api_process import ApiProcess
 from services.launch.processes import free_port
 from services.learner.reporter import RunReporter
@@ -60,7 +61,9 @@ def skill_run(redis_server, tmp_path_factory):
     cfg = ExperimentConfig.model_validate(SKILL_CFG)
     run_id = "api-skill-run"
     RunReporter(redis_server.url, run_id).start(cfg, tmp_path_factory.mktemp("run"), 1000, None)
-    sampler = SamplerService(cfg.model_dump(mode="json"), redis_server.url, run_id)
+    sampler = SamplerService(
+        cfg.model_dump(mode="json"), redis_server.url, run_id, clip=clip_setup(cfg)
+    )
     sampler.update_motion(None, 0, None, "proxy")  # past π0: tasks uniform over the box
     probe = make_env(cfg.character, cfg.task, cfg.env)
     worker = RolloutWorker(
@@ -134,6 +137,10 @@ def test_every_read_endpoint(api, run):
             3000,
         )
         assert p["mean_return"] == 30.0 and p["fall_percent"] == 50.0
+        ch = c.get(f"/runs/{run}/character").json()  # from the registry, via the learner
+        assert ch["name"] == "hopper" and ch["planar"] and not ch["swims"] and ch["gait"]
+        assert ch["shape_params"]["leg_length"] == [0.5, 1.5]
+        assert ch["clips"] == ["planar_jump"] and "paramimic/Hopper-v0" in ch["envs"]
 
         h = c.get(f"/runs/{run}/history").json()
         assert [x["iteration"] for x in h["items"]] == [1, 2, 3] and h["next_since"] == 3
@@ -176,6 +183,7 @@ def test_every_read_endpoint(api, run):
         ("/runs/nope/progress", 404, "no run 'nope'"),
         ("/runs/nope/curriculum", 404, "no run"),
         ("/runs/nope/events", 404, "no run"),
+        ("/runs/nope/character", 404, "no run"),
         ("/runs/bad%20id!/progress", 422, "pattern"),
         ("/runs/{run}/history?since=-1", 422, "greater than or equal"),
         ("/runs/{run}/history?since=abc", 422, "integer"),

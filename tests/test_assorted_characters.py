@@ -4,11 +4,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from paramimic.characters import get_character
+from paramimic.characters import get_character, registration
 from paramimic.characters.articulated import WATER_DENSITY
 from paramimic.characters.body import DENSITY
 from paramimic.envs import ParamEnv
-from paramimic.motion import REFERENCE_MOTIONS
 
 ASSORTED = ("biped_lower", "quadruped", "fish", "manta")
 SWIMMERS = ("fish", "manta")
@@ -93,7 +92,7 @@ def test_base_and_corner_shapes_hold_the_reference_pose_for_two_seconds(name):
     the base and the smallest and largest corners (every b at its minimum / maximum, 0.35x to
     1.8x per segment) stay standing or floating in place for 2 s."""
     d = get_character(name)
-    rest = REFERENCE_MOTIONS[name].rest_pose()
+    rest = registration(name).gait.rest_pose()
     for shape in (None, _corner(d, "low"), _corner(d, "high")):
         c = d.compile(shape)
         data, start = _hold(c, rest, 2.0)
@@ -112,7 +111,7 @@ def test_mixed_corner_shapes_compile_and_simulate(name):
     """Mixed corners (e.g. 0.5x wide, 1.5x tall on 0.7x feet) need balance, not just a PD
     hold: they may topple, but the simulation stays finite and within MuJoCo's limits."""
     d = get_character(name)
-    rest = REFERENCE_MOTIONS[name].rest_pose()
+    rest = registration(name).gait.rest_pose()
     for shape in _mixed_corners(d):
         c = d.compile(shape)
         data, _ = _hold(c, rest, 2.0)

@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from paramimic.characters import compile_character, get_character
+from paramimic.characters import get_character
 from paramimic.characters.body import DENSITY
 from paramimic.envs import ParamEnv
 
@@ -18,7 +18,7 @@ def _joint_anchor(model, data, body):
 
 
 def _leg_vector(shape, side="l"):
-    c = compile_character(WALKER, shape)
+    c = WALKER.compile(shape)
     d = mujoco.MjData(c.model)
     mujoco.mj_kinematics(c.model, d)
     hip = _joint_anchor(c.model, d, f"thigh_{side}")
@@ -36,28 +36,28 @@ def test_longer_leg_is_longer_by_the_factor():
 
 
 def test_split_keeps_leg_length_and_moves_the_knee():
-    c = compile_character(WALKER, {"thigh_shin_split": 1.2})
+    c = WALKER.compile({"thigh_shin_split": 1.2})
     assert c.segment_lengths["thigh_l"] == pytest.approx(0.54)
     assert c.segment_lengths["shin_l"] == pytest.approx(0.36)
     assert np.linalg.norm(_leg_vector({"thigh_shin_split": 1.2})) == pytest.approx(0.9)
 
 
 def test_mass_follows_volume():
-    base = compile_character(WALKER)
+    base = WALKER.compile()
     thigh = base.model.body("thigh_l")
     r, length = 0.05, 0.45
     volume = np.pi * r**2 * length + 4.0 / 3.0 * np.pi * r**3  # capsule
     assert base.model.body_mass[thigh.id] == pytest.approx(DENSITY * volume)
-    scaled = compile_character(WALKER, {"global_scale": 1.5})
+    scaled = WALKER.compile({"global_scale": 1.5})
     assert scaled.mass == pytest.approx(base.mass * 1.5**3)  # every dimension x1.5
-    thin = compile_character(WALKER, {"left_leg_length": 1.2})
+    thin = WALKER.compile({"left_leg_length": 1.2})
     m = thin.model.body_mass[thin.model.body("thigh_l").id]
     assert m == pytest.approx(DENSITY * (np.pi * r**2 * length * 1.2 + 4 / 3 * np.pi * r**3))
 
 
 @pytest.mark.parametrize("name", PLANAR)
 def test_feet_touch_the_ground_and_servos_are_stable_pd(name):
-    c = compile_character(get_character(name), {"global_scale": 0.7})
+    c = get_character(name).compile({"global_scale": 0.7})
     d = mujoco.MjData(c.model)
     mujoco.mj_kinematics(c.model, d)
     assert d.site_xpos[c.contact_site_ids, 2].min() == pytest.approx(0.0, abs=1e-9)
@@ -73,7 +73,7 @@ def test_feet_touch_the_ground_and_servos_are_stable_pd(name):
 
 def test_unknown_shape_parameter_is_rejected():
     with pytest.raises(KeyError, match="no shape parameter 'arm_length'"):
-        compile_character(WALKER, {"arm_length": 1.0})
+        WALKER.compile({"arm_length": 1.0})
 
 
 @pytest.mark.parametrize("name", PLANAR)

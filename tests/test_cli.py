@@ -5,10 +5,10 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
+from conftest import wait_until
 
 TINY = {
     "character": "hopper",
@@ -30,12 +30,17 @@ def _cli(*args, **kw):
     )
 
 
-def test_train_then_eval_writes_json(tmp_path):
-    cfg = tmp_path / "tiny.yaml"
-    cfg.write_text(yaml.safe_dump(TINY))
-    run = tmp_path / "run"
+def _train_serial(tmp_path: Path, config: dict) -> tuple[Path, Path]:
+    """`paramimic train CONFIG --serial` to the end; (config file, run dir)."""
+    cfg, run = tmp_path / "config.yaml", tmp_path / "run"
+    cfg.write_text(yaml.safe_dump(config))
     res = _cli("train", cfg, "--serial", "--run-dir", run)
     assert res.returncode == 0, res.stdout + res.stderr
+    return cfg, run
+
+
+def test_train_then_eval_writes_json(tmp_path):
+    cfg, run = _train_serial(tmp_path, TINY)
     assert (run / "checkpoints" / "latest.pt").is_file()
     lines = (run / "metrics.jsonl").read_text().splitlines()
     assert [json.loads(x)["iteration"] for x in lines] == [1, 2]
@@ -86,11 +91,7 @@ SKILL = {
 
 def test_skill_run_trains_resumes_and_evaluates(tmp_path):
     """An [L21] run in one process: the bootstrap stage, P_θ and the elites survive --resume."""
-    cfg = tmp_path / "skill.yaml"
-    cfg.write_text(yaml.safe_dump(SKILL))
-    run = tmp_path / "run"
-    res = _cli("train", cfg, "--serial", "--run-dir", run)
-    assert res.returncode == 0, res.stdout + res.stderr
+    cfg, run = _train_serial(tmp_path, SKILL)
     lines = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     assert [m["stage"] for m in lines] == ["proxy", "proxy", "proxy"]
     res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume", "--total-steps", 1024)
@@ -138,9 +139,7 @@ def test_ctrl_c_checkpoints_and_exits(tmp_path):
         env={**os.environ},
     )
     metrics = Path(run / "metrics.jsonl")
-    deadline = time.time() + 120
-    while time.time() < deadline and not (metrics.exists() and metrics.read_text().strip()):
-        time.sleep(0.2)
+    wait_until(lambda: metrics.exists() and metrics.read_text().strip(), 120, "a first iteration")
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 0, out

@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum.adaptive import AdaptiveCurriculum
-from paramimic.curriculum.marginal_value import marginal_function
+from paramimic.curriculum.adaptive import AdaptiveCurriculum, marginal_function
 
 
 def _curriculum(task: dict) -> AdaptiveCurriculum:

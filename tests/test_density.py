@@ -12,7 +12,7 @@ from paramimic.curriculum.density import (
     explored_ratio,
     regions,
 )
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.task_space import TaskSpace
 
 # gravity 0..2 and height 0..1, target velocity fixed: normalized x = g/2, y = h
 SPACE = TaskSpace.from_ranges({"g": (0.0, 2.0), "h": (0.0, 1.0), "v": (1.0, 1.0)})

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from paramimic.curriculum.elite_set import EliteSet
+from paramimic.curriculum.elite_set import EliteRule, EliteSet
 
 
 def test_enter_replace_and_dismiss_by_hand():
-    e = EliteSet(2, radius=0.1, threshold=0.1, improvement=0.02)
+    e = EliteSet(2, rule=EliteRule(radius=0.1, threshold=0.1, improvement=0.02))
     assert not e.offer([0.0, 0.0], 0.1, "failed").accepted  # F must exceed the threshold 0.1
     first = e.offer([0.0, 0.0], 0.5, "a")
     assert first.accepted and first.replaced == [] and first.improved  # a new region counts
@@ -26,7 +26,7 @@ def test_enter_replace_and_dismiss_by_hand():
 
 def test_weights_are_the_diagonal_metric_a():
     # A = diag(1, 100): a step of 0.02 along y is a distance² of 0.04 > r² = 0.01
-    e = EliteSet(2, weights=[1.0, 100.0], radius=0.1)
+    e = EliteSet(2, weights=[1.0, 100.0], rule=EliteRule(radius=0.1))
     e.offer([0.0, 0.0], 0.9, "a")
     assert e.offer([0.0, 0.02], 0.5, "b").accepted  # not a neighbour in this metric
     assert not e.offer([0.05, 0.0], 0.5, "c").accepted  # a neighbour of a along x
@@ -36,7 +36,9 @@ def test_weights_are_the_diagonal_metric_a():
 def test_tree_queries_equal_brute_force_under_inserts_and_deletes(rebuild_every):
     rng = np.random.default_rng(0)
     w = np.array([1.0, 4.0, 0.5])
-    e = EliteSet(3, weights=w, radius=0.15, threshold=0.0, rebuild_every=rebuild_every)
+    e = EliteSet(
+        3, weights=w, rebuild_every=rebuild_every, rule=EliteRule(radius=0.15, threshold=0.0)
+    )
     for i in range(600):
         e.offer(rng.random(3), float(rng.random()), f"e{i}")
         if i % 50 == 49:

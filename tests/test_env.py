@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from paramimic.envs import REGISTERED, REWARD_TERMS, ParamEnv
+from paramimic.envs import REWARD_TERMS, ParamEnv, registered_envs
 
 LEGS = {
     "left_leg_length": (0.7, 1.3),
@@ -13,7 +13,7 @@ LEGS = {
 }
 
 
-@pytest.mark.parametrize("env_id", sorted(REGISTERED))
+@pytest.mark.parametrize("env_id", sorted(registered_envs()))
 def test_registered_envs_pass_gymnasium_checks(env_id):
     env = gym.make(env_id)
     check_env(env.unwrapped)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from paramimic.curriculum.fitness import EpisodeTrace, fitness
+from paramimic.motion.fitness import EpisodeTrace, fitness
 
 
 def _trace(T=4, J=2, E=2) -> EpisodeTrace:

@@ -4,10 +4,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from paramimic.characters import get_character
+from paramimic.characters import get_character, registration
 from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
 from paramimic.envs import ParamEnv
-from paramimic.motion import REFERENCE_MOTIONS
 
 CASES = [("walker", 0.0), ("walker", 0.3), ("biped_lower", 0.3), ("quadruped", 0.0)]
 
@@ -36,7 +35,7 @@ def _eq1(points, targets, q, q0, idx, w=0.01):
 @pytest.mark.parametrize(("name", "phase"), CASES)
 def test_fit_puts_the_base_contacts_on_the_ground_closer_than_the_lift(name, phase):
     d = get_character(name)
-    motion = REFERENCE_MOTIONS[name]
+    motion = registration(name).gait
     base = d.compile()
     bd = mujoco.MjData(base.model)
     q_base = base.model.qpos0.copy()
@@ -81,7 +80,7 @@ def test_the_base_body_needs_no_fit():
     c = d.compile()
     data = mujoco.MjData(c.model)
     q0 = c.model.qpos0.copy()
-    q0[c.qpos_idx] = REFERENCE_MOTIONS["biped_lower"].pose(0.3)
+    q0[c.qpos_idx] = registration("biped_lower").gait.pose(0.3)
     q0 = lift_to_ground(c.model, data, q0, c.contact_site_ids, 2)
     targets = _contacts(c, data, q0)
     fit = fit_ground_contact(
@@ -112,7 +111,7 @@ def test_reset_fits_new_bodies_to_the_ground():
     the base's contacts in that pose: every point the base has on the ground is within 5 mm of
     it, none below; resets start from such postures (+1 mm clearance)."""
     env = ParamEnv("biped_lower", {"thigh_l_z": (0.7, 1.2), "global_z": (0.5, 1.5)})
-    motion = REFERENCE_MOTIONS["biped_lower"]
+    motion = registration("biped_lower").gait
     base, bd = env._base, env._base_data
     rng = np.random.default_rng(3)
     for seed in range(4):

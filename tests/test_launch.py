@@ -4,6 +4,7 @@ nothing left running after it exits, normally or by Ctrl-C."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -17,6 +18,7 @@ import psutil
 import pytest
 import redis
 import yaml
+from conftest import wait_until
 
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
@@ -84,14 +86,11 @@ class Launch:
         return "".join(self.lines)
 
     def api_url(self, timeout=180.0) -> str:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            m = re.search(r"API: (http://127\.0\.0\.1:\d+)", self.output())
-            if m:
-                return m.group(1)
+        def printed():
             assert self.proc.poll() is None, self.output()
-            time.sleep(0.1)
-        raise AssertionError(f"no API URL printed:\n{self.output()}")
+            return re.search(r"API: (http://127\.0\.0\.1:\d+)", self.output())
+
+        return wait_until(printed, timeout, "the API URL in the output", 0.1).group(1)
 
     def wait(self, timeout=300.0) -> int:
         code = self.proc.wait(timeout)
@@ -100,12 +99,9 @@ class Launch:
 
     def leftovers(self, timeout=30.0) -> list[str]:
         """Descendants still alive `timeout` s after the exit (Ray reaps its own)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            alive = [p for p in self.descendants if _alive(p)]
-            if not alive or time.monotonic() > deadline:
-                return [self.descendants[p] for p in alive]
-            time.sleep(0.5)
+        with contextlib.suppress(AssertionError):
+            wait_until(lambda: not any(_alive(p) for p in self.descendants), timeout, "", 0.5)
+        return [self.descendants[p] for p in self.descendants if _alive(p)]
 
 
 def _alive(p: psutil.Process) -> bool:
@@ -113,17 +109,6 @@ def _alive(p: psutil.Process) -> bool:
         return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
     except psutil.NoSuchProcess:
         return False
-
-
-def _wait_for(get, predicate, timeout=180.0, what=""):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = get()
-        if predicate(value):
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: last {value}")
-        time.sleep(0.2)
 
 
 def _stored_run(run_dir):
@@ -146,9 +131,9 @@ def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
         [summary] = c.get("/runs").json()
         run = summary["run_id"]
         assert summary["status"] == "running" and summary["name"] == "tiny"
-        progress = _wait_for(
-            lambda: c.get(f"/runs/{run}/progress").json(), lambda p: p["iteration"] >= 3,
-            what="3 iterations",
+        progress = wait_until(
+            lambda: (p := c.get(f"/runs/{run}/progress").json())["iteration"] >= 3 and p,
+            180, "3 iterations",
         )  # fmt: skip
         assert progress["env_steps"] >= 3 * 256 and progress["steps_per_second"] > 0
         history = c.get(f"/runs/{run}/history").json()["items"]
@@ -164,23 +149,21 @@ def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
 
         # pause: the learner holds before its next iteration
         assert c.post(f"/runs/{run}/pause", headers=auth).status_code == 202
-        _wait_for(
-            lambda: c.get(f"/runs/{run}/progress").json()["status"], lambda s: s == "paused",
-            what="paused",
-        )  # fmt: skip
+        wait_until(
+            lambda: c.get(f"/runs/{run}/progress").json()["status"] == "paused", 180, "paused"
+        )
         held = c.get(f"/runs/{run}/progress").json()["iteration"]
         time.sleep(2.0)
         assert c.get(f"/runs/{run}/progress").json()["iteration"] == held
         # k is applied while paused; resume goes on
         assert c.put(f"/runs/{run}/curriculum/k", json={"k": 0}, headers=auth).status_code == 202
-        _wait_for(
-            lambda: c.get(f"/runs/{run}/curriculum").json(), lambda x: x["mode"] == "uniform",
-            what="k = 0",
-        )  # fmt: skip
+        wait_until(
+            lambda: c.get(f"/runs/{run}/curriculum").json()["mode"] == "uniform", 180, "k = 0"
+        )
         assert c.post(f"/runs/{run}/resume", headers=auth).status_code == 202
-        _wait_for(
-            lambda: c.get(f"/runs/{run}/progress").json()["iteration"], lambda i: i > held,
-            what="training to go on",
+        wait_until(
+            lambda: c.get(f"/runs/{run}/progress").json()["iteration"] > held, 180,
+            "training to go on",
         )  # fmt: skip
         kinds = [e["type"] for e in c.get(f"/runs/{run}/events?limit=1000").json()]
         for kind in ("run_paused", "k_changed", "run_running"):

@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from paramimic.curriculum import MarginalValue, TaskSpace
+from paramimic.curriculum.marginal_value import MarginalValue
 from paramimic.rl.networks import RunningMeanStd
+from paramimic.task_space import TaskSpace
 
 SPACE = TaskSpace.from_ranges({"left": (0.7, 1.3), "right": (0.7, 1.3), "v": (1.0, 1.0)})
 

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from paramimic.curriculum import AdaptiveSampler, TaskSpace, metropolis_hastings
-from paramimic.curriculum.mcmc import surrogate_log_density
+from paramimic.curriculum.mcmc import AdaptiveSampler, metropolis_hastings, surrogate_log_density
+from paramimic.task_space import TaskSpace
 
 SPACE = TaskSpace.from_ranges({"leg": (0.5, 1.5), "v": (1.0, 1.0)})
 

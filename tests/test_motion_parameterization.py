@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from paramimic.curriculum.elite_set import EliteSet
+from paramimic.curriculum.elite_set import EliteRule, EliteSet
 from paramimic.curriculum.knn_proxy import knn_proxy, knn_weights
 from paramimic.motion.parameterization import displace, displace_hinges, time_warp, warp_at
 
@@ -46,7 +46,7 @@ def test_knn_weights_by_hand():
 
 
 def test_knn_proxy_interpolates_elite_traces():
-    e = EliteSet(1, radius=0.05)
+    e = EliteSet(1, rule=EliteRule(radius=0.05))
     traces = {}
     for i, x in enumerate([0.0, 0.5, 1.0]):
         e.offer([x], 0.8, f"e{i}")
@@ -62,7 +62,7 @@ def test_parameterization_net_fits_a_smooth_mapping():
     import torch
 
     from paramimic.curriculum.parameterization_net import ParameterizationNet
-    from paramimic.curriculum.task_space import TaskSpace
+    from paramimic.task_space import TaskSpace
 
     torch.set_num_threads(1)
     space = TaskSpace.from_ranges({"g": (0.5, 1.5), "h": (0.0, 1.0)})

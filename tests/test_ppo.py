@@ -23,32 +23,19 @@ def test_clipped_loss_by_hand():
     assert stats["clip_fraction"] == pytest.approx(2 / 3)
 
 
+def _loss_with_advantage_one(new_logp):
+    """The clipped surrogate of one sample: old log-prob 0, advantage 1, clip 0.2, no value or
+    entropy terms."""
+    z = torch.zeros(1)
+    return ppo_loss(new_logp, z, torch.ones(1), z, z, torch.tensor(0.0), 0.2, 0.0, 0.0)
+
+
 def test_gradient_vanishes_outside_the_clip_region():
     new = torch.tensor([np.log(2.0)], requires_grad=True)
-    loss, _ = ppo_loss(
-        new,
-        torch.zeros(1),
-        torch.ones(1),
-        torch.zeros(1),
-        torch.zeros(1),
-        torch.tensor(0.0),
-        0.2,
-        0.0,
-        0.0,
-    )
+    loss, _ = _loss_with_advantage_one(new)
     loss.backward()
     assert float(new.grad) == 0.0  # ratio 2 > 1.2 with A > 0: clipped, no push further
     new2 = torch.tensor([0.0], requires_grad=True)
-    loss2, _ = ppo_loss(
-        new2,
-        torch.zeros(1),
-        torch.ones(1),
-        torch.zeros(1),
-        torch.zeros(1),
-        torch.tensor(0.0),
-        0.2,
-        0.0,
-        0.0,
-    )
+    loss2, _ = _loss_with_advantage_one(new2)
     loss2.backward()
     assert float(new2.grad) == pytest.approx(-1.0)  # d(−ρA)/dlogp at ρ = 1

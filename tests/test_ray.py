@@ -3,12 +3,12 @@
 import os
 import signal
 import threading
-import time
 from contextlib import ExitStack
 
 import numpy as np
 import pytest
 import ray
+from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
 from services.launch.stack import ray_stack
@@ -101,20 +101,15 @@ def test_killed_actor_is_restarted_and_the_run_finishes(distributed, tmp_path):
 
 def _pids_when_back(backend, timeout=120.0):
     """Actor pids, once a restarting actor answers again (the run may end before it is back)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            return backend.pids()
-        except ray.exceptions.RayActorError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.5)
+    retry = (ray.exceptions.RayActorError,)
+    return wait_until(backend.pids, timeout, "the actor to answer again", 0.5, retry)
 
 
 def test_resume_restores_identical_state(distributed, tmp_path):
     cfg = _cfg()
     first, backend = distributed(cfg, tmp_path)
     first.train(backend, total_steps=2 * 256)
+    backend.close()  # its CPUs go to the resumed run's actors (else they wait lost_timeout)
     second, _ = distributed(cfg, tmp_path, suffix="-resumed")
     second.load_state_dict(checkpoint.load(tmp_path))
     a, b = first.learner.state_dict(), second.learner.state_dict()
@@ -166,7 +161,7 @@ def test_pipelined_mode_samples_during_the_update(distributed, tmp_path):
 
 
 def test_auto_sizes_the_pool_from_the_cluster_cpus(local_ray):
-    from services.learner.ray_backend import resolve_num_actors
+    from services.learner.actor_pool import resolve_num_actors
 
     assert resolve_num_actors("auto") == 3  # one per CPU of the cluster
     assert resolve_num_actors(5) == 5

@@ -67,10 +67,16 @@ def test_env_uses_the_scales_of_its_body():
 
 
 def test_energy_scale_reaches_the_torque_bell():
-    """Same torques, heavier body: the torque term's exponent is scaled by m0/m."""
-    heavy = _env_scales(True, global_scale=1.3)
-    plain = _env_scales(False, global_scale=1.3)
-    rows = heavy._torque_rows
-    ratio = heavy._block_exponent[rows].sum() / plain._block_exponent[rows].sum()
-    assert ratio == pytest.approx(heavy._base.mass / heavy.character.mass)
-    assert ratio == pytest.approx(1.0 / 1.3**3)
+    """Same state, heavier body: the torque bell's exponent is scaled by m0/m = 1/1.3³, so the
+    normalized bell is the unnormalized one raised to that power."""
+    env = _env_scales(True, global_scale=1.3)
+    energy = env._scales.energy
+    assert energy == pytest.approx(env._base.mass / env.character.mass)
+    assert energy == pytest.approx(1.0 / 1.3**3)
+    env.step(np.full(env.action_space.shape, 0.5, np.float32))  # torques to penalize
+    ref = env._reference_at(env._phase)
+    normalized = env._reward(ref)[1]["torque"]
+    env._scales = RewardScales(env._scales.velocity, env._scales.direction, 1.0)
+    plain = env._reward(ref)[1]["torque"]
+    assert plain < 0.99
+    assert normalized == pytest.approx(plain**energy)

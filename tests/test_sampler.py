@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import ray
 import redis
+from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
 from services.keys import RunKeys
@@ -126,14 +127,6 @@ def _train_in_thread(stack, total_steps, gate=None):
     return thread, metrics, errors
 
 
-def _wait_for(predicate, timeout=120.0, what="condition"):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.1)
-
-
 def _events(url: str, run_id: str) -> list[str]:
     r = redis.Redis.from_url(url, decode_responses=True)
     return [f["type"] for _, f in r.xrange(RunKeys(run_id).events)]
@@ -148,11 +141,11 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(
     with ray_stack(cfg, tmp_path, redis_server.url, run_id) as stack:
         total = 8 * 2 * 4 * 100
         thread, metrics, errors = _train_in_thread(stack, total, gate)
-        _wait_for(lambda: len(metrics) >= 2, what="two iterations")
+        wait_until(lambda: len(metrics) >= 2, 120, "two iterations")
         # 1) at rest (the learner held before an iteration): the restarted sampler's state
         #    equals the state before the kill
         gate.open_.clear()
-        _wait_for(gate.held.is_set, what="the learner to hold")  # sync mode: no call in flight
+        wait_until(gate.held.is_set, 120, "the learner to hold")  # sync mode: no call in flight
         n = len(metrics)
         before = ray.get(stack.sampler.digest.remote())
         pid = ray.get(stack.sampler.pid.remote())
@@ -164,7 +157,7 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(
         assert restart["data"]["digest"] == before  # what it reloaded is what it had
         # 2) mid-fragment: actors are calling it; Ray retries their calls on the new sampler
         gate.open_.set()
-        _wait_for(lambda: len(metrics) >= n + 2, what="training to go on")
+        wait_until(lambda: len(metrics) >= n + 2, 120, "training to go on")
         time.sleep(0.3)
         os.kill(ray.get(stack.sampler.pid.remote()), signal.SIGKILL)
         thread.join(timeout=600)
@@ -184,7 +177,7 @@ def test_a_redis_restart_during_a_run_loses_nothing_acknowledged(local_ray, run_
         cfg = _cfg(steps_per_fragment=100)
         with ray_stack(cfg, tmp_path, server.url, run_id) as stack:
             thread, metrics, errors = _train_in_thread(stack, 10 * 2 * 4 * 100)
-            _wait_for(lambda: len(metrics) >= 2, what="two iterations")
+            wait_until(lambda: len(metrics) >= 2, 120, "two iterations")
             client = redis.Redis.from_url(server.url, decode_responses=True)
             acknowledged = client.smembers(RunKeys(run_id).seen)
             episodes_before = json.loads(client.hget(RunKeys(run_id).curriculum, "summary"))[

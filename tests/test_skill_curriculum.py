@@ -11,7 +11,7 @@ from paramimic.curriculum.bootstrap import Bootstrap
 from paramimic.curriculum.density import SURROUNDING, VISITED
 from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import SkillCurriculum
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.task_space import TaskSpace
 
 SPACE = TaskSpace.from_ranges({"gravity": (0.0, 1.0), "jump_height": (0.0, 1.0)})
 SHAPE = (4, 3)

@@ -9,6 +9,7 @@ import ray
 import redis
 
 from paramimic.config import ExperimentConfig
+from paramimic.envs.skill_env import clip_setup
 from services.keys import RunKeys
 from services.launch.stack import ray_stack
 from services.learner.reporter import RunReporter
@@ -64,7 +65,9 @@ def test_walker_jump_on_ray_fills_elites_in_redis_and_the_api(
     assert shape == (16, 3 + 6 + 1)  # bins x (root x/z/pitch, six joints, τ)
     assert min(elites["fitness"]) > 0.1
     # a sampler started again on the same run reloads exactly this state, traces included
-    again = SamplerService(cfg.model_dump(mode="json"), redis_server.url, run_id, restarted=True)
+    again = SamplerService(
+        cfg.model_dump(mode="json"), redis_server.url, run_id, True, clip=clip_setup(cfg)
+    )
     assert again.digest() == digest
 
     with httpx.Client(base_url=api_url) as c:

@@ -1,34 +1,41 @@
-"""Parametric characters: base bodies and the shape map F(B̄, b) ([WL19] §3.1)."""
+"""Parametric characters: base bodies and the shape map F(B̄, b) ([WL19] §3.1), registered once
+each in `registry` (a new character: one file and one `register` line below)."""
 
-from paramimic.characters.articulated import BIPED_LOWER, FISH, MANTA, QUADRUPED
-from paramimic.characters.body import (
-    Character,
-    CharacterDef,
-    ShapeParam,
-    build_spec,
-    compile_character,
+from paramimic.characters.articulated import (
+    BIPED_LOWER_REGISTRATION,
+    FISH_REGISTRATION,
+    MANTA_REGISTRATION,
+    QUADRUPED_REGISTRATION,
 )
-from paramimic.characters.humanoid import HUMANOID
-from paramimic.characters.planar import HOPPER, WALKER
+from paramimic.characters.body import Body, ShapeParam
+from paramimic.characters.humanoid import HUMANOID_REGISTRATION
+from paramimic.characters.planar import HOPPER_REGISTRATION, WALKER_REGISTRATION
+from paramimic.characters.registry import (
+    REGISTRY,
+    Character,
+    Registration,
+    clip_owners,
+    get_character,
+    register,
+    registration,
+)
 
-CHARACTERS: dict[str, CharacterDef] = {
-    c.name: c for c in (WALKER, HOPPER, HUMANOID, BIPED_LOWER, QUADRUPED, FISH, MANTA)
-}
-
-
-def get_character(name: str) -> CharacterDef:
-    try:
-        return CHARACTERS[name]
-    except KeyError:
-        raise KeyError(f"unknown character {name!r}; known: {sorted(CHARACTERS)}") from None
-
+register(WALKER_REGISTRATION)
+register(HOPPER_REGISTRATION)
+register(HUMANOID_REGISTRATION)
+register(BIPED_LOWER_REGISTRATION)
+register(QUADRUPED_REGISTRATION)
+register(FISH_REGISTRATION)
+register(MANTA_REGISTRATION)
 
 __all__ = [
-    "CHARACTERS",
+    "REGISTRY",
+    "Body",
     "Character",
-    "CharacterDef",
+    "Registration",
     "ShapeParam",
-    "build_spec",
-    "compile_character",
+    "clip_owners",
     "get_character",
+    "register",
+    "registration",
 ]

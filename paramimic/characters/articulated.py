@@ -21,15 +21,19 @@ import numpy as np
 
 from paramimic.characters.body import (
     DENSITY,
-    TIMESTEP,
-    Character,
+    Body,
     Joint,
     ShapeParam,
+    add_hinge,
     add_sensors,
     add_servos,
     index_character,
+    joint_names,
     shape_with_defaults,
+    world_spec,
 )
+from paramimic.characters.registry import Registration
+from paramimic.motion.procedural import SinusoidalMotion, alternating, gait
 
 Vec3 = tuple[float, float, float]
 WATER_DENSITY = 997.0  # kg/m³ ([WL19] §5.3)
@@ -76,6 +80,10 @@ class BodyPlan:
     @property
     def fall_bodies(self) -> tuple[str, ...]:
         return (self.root, *self.extra_fall_bodies)
+
+    @property
+    def planar(self) -> bool:
+        return False  # a free root
 
     @cached_property
     def joints(self) -> tuple[Joint, ...]:
@@ -139,7 +147,7 @@ class BodyPlan:
             return SWIM_DEPTH, legs
         return -min(sole(f) for f in self.feet), legs
 
-    def compile(self, shape: dict[str, float] | None = None) -> Character:
+    def compile(self, shape: dict[str, float] | None = None) -> Body:
         shape = shape_with_defaults(self, shape)
         spec = self.spec(shape)
         height, legs = self.rest_height(shape)
@@ -150,24 +158,11 @@ class BodyPlan:
     def spec(self, shape: dict[str, float]) -> mujoco.MjSpec:
         ext, local, _ = self.layout(shape)
         height, _ = self.rest_height(shape)
-        spec = mujoco.MjSpec()
-        spec.modelname = self.name
-        spec.compiler.degree = False
-        spec.option.timestep = TIMESTEP
-        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        spec = world_spec(self.name, floor=not self.swims, light_height=height + 4)
         if self.swims:
             spec.option.gravity = [0.0, 0.0, 0.0]
             spec.option.density = WATER_DENSITY
             spec.option.viscosity = WATER_VISCOSITY
-        else:
-            spec.worldbody.add_geom(
-                name="floor",
-                type=mujoco.mjtGeom.mjGEOM_PLANE,
-                size=[0, 0, 1],
-                friction=[1.0, 0.005, 1e-4],
-                rgba=[0.8, 0.8, 0.8, 1],
-            )
-        spec.worldbody.add_light(pos=[0, 0, height + 4], dir=[0, 0, -1])
         bodies: dict[str, mujoco.MjsBody] = {}
         for p in self.parts:
             if p.parent is None:
@@ -177,14 +172,7 @@ class BodyPlan:
                 body = bodies[p.parent].add_body(name=p.name, pos=local[p.name].tolist())
             bodies[p.name] = body
             for j in p.joints:
-                body.add_joint(
-                    name=j.name,
-                    type=mujoco.mjtJoint.mjJNT_HINGE,
-                    axis=list(j.axis),
-                    range=list(j.range),
-                    limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                    armature=0.01,
-                )
+                add_hinge(body, j)
             self._add_geom(body, p, ext[p.name])
         add_servos(spec, self.joints)
         add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
@@ -316,7 +304,7 @@ def _quadruped() -> BodyPlan:
     )
 
 
-def _swim_joints(name: str, kp: float, first: Vec3, second: Vec3) -> tuple[Joint, ...]:
+def _swimjoint_names(name: str, kp: float, first: Vec3, second: Vec3) -> tuple[Joint, ...]:
     return (
         Joint(f"{name}_a", (-0.8, 0.8), kp, 0.6 * kp, axis=first),
         Joint(f"{name}_b", (-0.5, 0.5), kp, 0.6 * kp, axis=second),
@@ -336,7 +324,7 @@ def _fish() -> BodyPlan:
                 sizes[i],
                 (-0.5, 0.0, 0.0),
                 (-0.5, 0.0, 0.0),
-                _swim_joints(f"spine{i}", 40.0 - 5.0 * i, YAW, PITCH),
+                _swimjoint_names(f"spine{i}", 40.0 - 5.0 * i, YAW, PITCH),
             )
         )
     return BodyPlan(
@@ -363,7 +351,7 @@ def _manta() -> BodyPlan:
                     (sx, sy, 0.05 - 0.01 * i),
                     (0.0, 0.5 * y, 0.0),
                     (0.0, 0.5 * y, 0.0),
-                    _swim_joints(f"{name}", 30.0 - 8.0 * i, ROLL, PITCH),
+                    _swimjoint_names(f"{name}", 30.0 - 8.0 * i, ROLL, PITCH),
                 )
             )
             parent = name
@@ -374,7 +362,7 @@ def _manta() -> BodyPlan:
             (0.4, 0.03, 0.03),
             (-0.5, 0, 0),
             (-0.5, 0, 0),
-            _swim_joints("tail", 5.0, YAW, PITCH),
+            _swimjoint_names("tail", 5.0, YAW, PITCH),
         )
     )
     return BodyPlan(
@@ -390,3 +378,57 @@ BIPED_LOWER = _biped_lower()
 QUADRUPED = _quadruped()
 FISH = _fish()
 MANTA = _manta()
+
+
+# --- their reference gaits ([WL19] §5.3: sinusoidal keyframes) ------------------------------
+
+# The lower-body biped walks like the planar walker: hip pitch, knee and ankle pitch per leg,
+# with a little hip roll shifting the weight over the stance leg. The offsets (the mean pose)
+# stand with slightly bent knees and flat feet (hip + knee + ankle = 0).
+_BIPED_LEG = {  # one leg: offset, a1, a2, phase
+    "hip_{side}_pitch": (0.10, 0.32, 0.00, 0.00),
+    "knee_{side}": (-0.20, -0.30, 0.05, 0.25),
+    "ankle_{side}_pitch": (0.10, 0.15, 0.00, -0.10),
+    "hip_{side}_roll": (0.00, 0.04, 0.00, 0.25),
+}
+BIPED_LOWER_GAIT = gait(joint_names(BIPED_LOWER), 1.0, alternating(_BIPED_LEG))
+
+
+def _trot() -> SinusoidalMotion:
+    """A trot: diagonal legs (front-right with hind-left) swing together, half a cycle apart."""
+    rows = {}
+    for side, phase in (("fr", 0.0), ("hl", 0.0), ("fl", 0.5), ("hr", 0.5)):
+        rows[f"hip_{side}_pitch"] = (0.10, 0.30, 0.00, phase)
+        rows[f"knee_{side}"] = (-0.20, -0.30, 0.00, phase + 0.25)
+        rows[f"ankle_{side}_pitch"] = (0.10, 0.10, 0.00, phase - 0.10)
+    return gait(joint_names(QUADRUPED), 0.6, rows)
+
+
+QUADRUPED_GAIT = _trot()
+
+# Carangiform swimming: a wave travels head to tail along the spine (yaw), its amplitude
+# growing toward the tail ([WL19] §5.3: sinusoidal keyframes).
+FISH_GAIT = gait(
+    joint_names(FISH),
+    1.0,
+    {f"spine{i}_a": (0.0, 0.08 + 0.06 * i, 0.0, -0.15 * i) for i in range(1, 6)},
+)
+
+# Manta: the wings flap (roll, mirrored left and right) with a lag toward the tips and twist
+# (pitch) a quarter cycle ahead, which turns the flap into thrust.
+MANTA_GAIT = gait(
+    joint_names(MANTA),
+    1.5,
+    {
+        f"wing{i}_{side}_{dof}": (0.0, sign * amp, 0.0, lag - 0.1 * i)
+        for i in range(3)
+        for side, sign in (("l", 1.0), ("r", -1.0))
+        for dof, amp, lag in (("a", 0.35, 0.0), ("b", 0.15 * sign, 0.25))
+    },
+)
+
+
+BIPED_LOWER_REGISTRATION = Registration(BIPED_LOWER, gait=BIPED_LOWER_GAIT)
+QUADRUPED_REGISTRATION = Registration(QUADRUPED, gait=QUADRUPED_GAIT)
+FISH_REGISTRATION = Registration(FISH, gait=FISH_GAIT)
+MANTA_REGISTRATION = Registration(MANTA, gait=MANTA_GAIT)

@@ -94,7 +94,15 @@ class CharacterDef:
         """Bodies whose contact with the ground is a fall."""
         return (self.root,)
 
-    def pose_qpos(self, character: Character, pose) -> np.ndarray:
+    @property
+    def planar(self) -> bool:
+        return True  # slide x, slide z and pitch
+
+    @property
+    def swims(self) -> bool:
+        return False
+
+    def pose_qpos(self, character: Body, pose) -> np.ndarray:
         """qpos [n, nq] of clip poses (a `ClipPose` with world root heights): root x, z
         relative to the body's build height, pitch about PLANAR_AXIS; joints by name."""
         model = character.model
@@ -107,7 +115,7 @@ class CharacterDef:
             qpos[:, model.jnt_qposadr[model.joint(name).id]] = pose.revolute[:, r]
         return qpos
 
-    def compile(self, shape: dict[str, float] | None = None) -> Character:
+    def compile(self, shape: dict[str, float] | None = None) -> Body:
         built = build_spec(self, shape)
         return index_character(
             self, built.shape, built.spec.compile(), built.legs, built.hip_height, built.lengths
@@ -115,7 +123,7 @@ class CharacterDef:
 
 
 @dataclass
-class Character:
+class Body:
     """A compiled character: the model plus the indices the environment needs."""
 
     definition: CharacterDef
@@ -137,6 +145,11 @@ class Character:
     mass: float
     hip_height: float  # root (hip) height when standing straight on the ground
     segment_lengths: dict[str, float] = field(default_factory=dict)
+
+
+def joint_names(definition) -> tuple[str, ...]:
+    """The actuated joints of a character, in actuator order (what a gait drives)."""
+    return tuple(j.name for j in definition.joints)
 
 
 def shape_with_defaults(
@@ -170,19 +183,7 @@ def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) 
     """F(B̄, b): a fresh MjSpec of the character with shape `b` standing on a ground plane."""
     shape = shape_with_defaults(definition, shape)
     dims = _scaled_segments(definition, shape)
-    spec = mujoco.MjSpec()
-    spec.modelname = definition.name
-    spec.compiler.degree = False
-    spec.option.timestep = TIMESTEP
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.worldbody.add_geom(
-        name="floor",
-        type=mujoco.mjtGeom.mjGEOM_PLANE,
-        size=[0, 0, 1],
-        friction=[1.0, 0.005, 1e-4],
-        rgba=[0.8, 0.8, 0.8, 1],
-    )
-    spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1])
+    spec = world_spec(definition.name)
 
     legs = [sum(dims[s][0] for s in leg) for leg in definition.legs]
     foot_drop = max(_foot_thickness(definition, shape, f) for f in definition.feet)
@@ -202,14 +203,7 @@ def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) 
             body = bodies[seg.parent].add_body(name=seg.name, pos=offset.tolist())
         bodies[seg.name] = body
         if seg.joint is not None:
-            body.add_joint(
-                name=seg.joint.name,
-                type=mujoco.mjtJoint.mjJNT_HINGE,
-                axis=list(PLANAR_AXIS),
-                range=list(seg.joint.range),
-                limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                armature=0.01,
-            )
+            add_hinge(body, seg.joint)
         _add_geom(body, seg, length, width, shape)
     add_servos(spec, definition.joints)
     add_sensors(
@@ -221,6 +215,38 @@ def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) 
         legs=np.array(legs),
         hip_height=hip_height,
         lengths={k: v[0] for k, v in dims.items()},
+    )
+
+
+def world_spec(name: str, floor: bool = True, light_height: float = 4.0) -> mujoco.MjSpec:
+    """An empty world every character is built into: the simulation options of [WL19] Table 2
+    (600 Hz, the implicit integrator that makes the PD servos stable), a floor and a light."""
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.degree = False
+    spec.option.timestep = TIMESTEP
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    if floor:
+        spec.worldbody.add_geom(
+            name="floor",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[0, 0, 1],
+            friction=[1.0, 0.005, 1e-4],
+            rgba=[0.8, 0.8, 0.8, 1],
+        )
+    spec.worldbody.add_light(pos=[0, 0, light_height], dir=[0, 0, -1])
+    return spec
+
+
+def add_hinge(body: mujoco.MjsBody, joint: Joint) -> None:
+    """A limited hinge about `joint.axis` (body frame) with a little armature."""
+    body.add_joint(
+        name=joint.name,
+        type=mujoco.mjtJoint.mjJNT_HINGE,
+        axis=list(joint.axis),
+        range=list(joint.range),
+        limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+        armature=0.01,
     )
 
 
@@ -319,11 +345,6 @@ def _add_geom(
         body.add_site(name=f"{seg.name}_c{i}", pos=[x, y, -thickness])  # [WL19] Eq. 1 points
 
 
-def compile_character(definition: CharacterDef, shape: dict[str, float] | None = None) -> Character:
-    """Build and compile; returns the model with the indices the environment uses."""
-    return definition.compile(shape)
-
-
 def index_character(
     definition,
     shape: dict[str, float],
@@ -331,14 +352,14 @@ def index_character(
     legs: np.ndarray,
     hip_height: float,
     lengths: dict[str, float],
-) -> Character:
+) -> Body:
     """The indices of a compiled model built with `add_sensors` and sites `{ee}_end`,
     `{foot}_c0..3`. `definition` has `joints`, `end_effectors`, `feet` and `root`."""
     joints = definition.joints
     jids = [model.joint(j.name).id for j in joints]
     feet_sites = [f"{f}_c{i}" for f in definition.feet for i in range(4)]
     root = model.body(definition.root).id
-    return Character(
+    return Body(
         definition=definition,
         shape=shape,
         model=model,

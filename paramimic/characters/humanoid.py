@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 from importlib import resources
 
 import mujoco
@@ -20,16 +20,17 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from paramimic.characters.body import (
-    TIMESTEP,
-    Character,
+    Body,
     Joint,
     ShapeParam,
     add_sensors,
     add_servos,
     index_character,
     shape_with_defaults,
+    world_spec,
 )
-from paramimic.motion.clip import ClipPose
+from paramimic.characters.registry import Registration
+from paramimic.motion.clip import Clip, ClipPose, load_deepmimic
 
 DATA = resources.files("paramimic") / "data" / "deepmimic"
 # PD gains of DeepMimic's humanoid3d controller (kp in N·m/rad; kd = kp / 10)
@@ -61,6 +62,8 @@ class HumanoidDef:
     root: str = "root"
     fall_bodies: tuple[str, ...] = ("root", "chest", "neck")  # DeepMimic's EnableFallContact
     shape_params: tuple[ShapeParam, ...] = SHAPE_PARAMS
+    planar: bool = False  # a free root
+    swims: bool = False
 
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.shape_params)
@@ -110,7 +113,7 @@ class HumanoidDef:
     def revolute(self) -> tuple[str, ...]:
         return tuple(j["Name"] for j in self.skeleton if j["Type"] == "revolute")
 
-    def compile(self, shape: dict[str, float] | None = None) -> Character:
+    def compile(self, shape: dict[str, float] | None = None) -> Body:
         shape = shape_with_defaults(self, shape)
         model = self.spec(shape).compile()
         legs = np.full(2, BASE_LEG * shape["height"] * shape["leg_length"])
@@ -122,18 +125,7 @@ class HumanoidDef:
         (the file's bodies hang along their local y), shapes scale in length and thickness, and
         masses follow the shapes' volumes."""
         shape = shape_with_defaults(self, shape)
-        spec = mujoco.MjSpec()
-        spec.modelname = self.name
-        spec.compiler.degree = False
-        spec.option.timestep = TIMESTEP
-        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-        spec.worldbody.add_geom(
-            name="floor",
-            type=mujoco.mjtGeom.mjGEOM_PLANE,
-            size=[0, 0, 1],
-            friction=[1, 0.005, 1e-4],
-        )
-        spec.worldbody.add_light(pos=[0, 0, 4], dir=[0, 0, -1])
+        spec = world_spec(self.name)
         shapes = {b["Name"]: b for b in self.description["BodyDefs"]}
         bodies: dict[int, mujoco.MjsBody] = {}
         for j in self.skeleton:
@@ -173,7 +165,7 @@ class HumanoidDef:
         add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
         return spec
 
-    def pose_qpos(self, character: Character, pose: ClipPose) -> np.ndarray:
+    def pose_qpos(self, character: Body, pose: ClipPose) -> np.ndarray:
         """qpos [n, nq] of clip poses: free root (position, w-first quaternion) and the hinge
         angles of each joint, found by name."""
         model = character.model
@@ -251,11 +243,17 @@ def _add_shape(body: mujoco.MjsBody, b: dict) -> None:
 HUMANOID = HumanoidDef()
 
 
-def humanoid_clip(name: str):
-    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel."""
-    from paramimic.motion.clip import load_deepmimic
+CLIPS = ("walk", "run", "jump", "backflip", "cartwheel")  # shipped in data/deepmimic
 
+
+def humanoid_clip(name: str) -> Clip:
+    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel."""
     path = DATA / f"humanoid3d_{name}.txt"
     if not path.is_file():
         raise KeyError(f"no humanoid clip {name!r}; shipped: walk, run, jump, backflip, cartwheel")
     return load_deepmimic(path, name=f"humanoid_{name}")
+
+
+HUMANOID_REGISTRATION = Registration(
+    HUMANOID, clips={f"humanoid_{name}": partial(humanoid_clip, name) for name in CLIPS}
+)

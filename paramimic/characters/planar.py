@@ -6,7 +6,11 @@ torque limits were tuned once on the base bodies and stay fixed for every shape 
 
 from __future__ import annotations
 
-from paramimic.characters.body import UP, CharacterDef, Joint, Segment, ShapeParam
+from functools import partial
+
+from paramimic.characters.body import UP, CharacterDef, Joint, Segment, ShapeParam, joint_names
+from paramimic.characters.registry import Registration
+from paramimic.motion.procedural import alternating, gait, planar_jump_clip
 
 _GLOBAL = ShapeParam("global_scale", 0.5, 1.5, "height: every length and width")
 _SPLIT = ShapeParam(
@@ -97,4 +101,61 @@ HOPPER = CharacterDef(
     legs=(("thigh", "shin"),),
     end_effectors=("foot", "torso"),
     feet=("foot",),
+)
+
+
+# Walking at about 1 m/s: two steps of ~0.5 m per 1 s cycle. The right leg swings forward around
+# φ = 0, the left half a cycle later. Hip flexion is positive forward, knees flex negative and
+# bend most in mid-swing, ankles roll heel to toe.
+_WALKER_LEG = {  # one leg: offset, a1, a2, phase
+    "hip_{side}": (0.20, 0.32, 0.00, 0.00),
+    "knee_{side}": (-0.45, -0.35, 0.05, 0.25),
+    "ankle_{side}": (0.00, 0.15, 0.00, -0.10),
+}
+WALKER_GAIT = gait(joint_names(WALKER), 1.0, alternating(_WALKER_LEG))
+
+# Hopping: crouch and extend twice a second, the leg swinging slightly forward in flight.
+HOPPER_GAIT = gait(
+    joint_names(HOPPER),
+    0.5,
+    {
+        "hip": (0.35, 0.20, 0.00, 0.00),
+        "knee": (-0.55, -0.35, 0.00, 0.25),
+        "ankle": (0.15, 0.20, 0.00, 0.25),
+    },
+)
+
+
+def _jump(character: CharacterDef) -> partial:
+    """[L21] Jump at laptop scale on the character's base legs (`planar_jump_clip`)."""
+    segments = {s.name: s for s in character.segments}
+    thigh, shin = (segments[n].length for n in character.legs[0])
+    foot = segments[character.feet[0]].thickness
+    return partial(planar_jump_clip, joint_names(character), thigh, shin, foot)
+
+
+_LEGS = (0.7, 1.3)
+
+
+def _at_speed(**shape: tuple[float, float]) -> dict:
+    """make_env kwargs: a task space of these shape ranges at the target speed 1 m/s."""
+    return {"task": {**shape, "target_velocity": (1.0, 1.0)}}
+
+
+def _registration(character: CharacterDef, gait, envs: dict) -> Registration:
+    return Registration(character, gait=gait, clips={"planar_jump": _jump(character)}, envs=envs)
+
+
+WALKER_REGISTRATION = _registration(
+    WALKER,
+    WALKER_GAIT,
+    {
+        "Walker": _at_speed(),
+        "WalkerLegs": _at_speed(left_leg_length=_LEGS, right_leg_length=_LEGS),
+    },
+)
+HOPPER_REGISTRATION = _registration(
+    HOPPER,
+    HOPPER_GAIT,
+    {"Hopper": _at_speed(), "HopperShape": _at_speed(leg_length=_LEGS, torso_length=(0.8, 1.2))},
 )

@@ -1,13 +1,3 @@
-"""The curriculum: task space, marginal value V̄, adaptive MCMC sampling ([WL19] §4.2)."""
-
-from paramimic.curriculum.marginal_value import MarginalValue
-from paramimic.curriculum.mcmc import AdaptiveSampler, metropolis_hastings, surrogate_log_density
-from paramimic.curriculum.task_space import TaskSpace
-
-__all__ = [
-    "AdaptiveSampler",
-    "MarginalValue",
-    "TaskSpace",
-    "metropolis_hastings",
-    "surrogate_log_density",
-]
+"""The curriculum: marginal value V̄, adaptive MCMC sampling ([WL19] §4.2), elites, density and
+phases ([L21] §5-6). Import the modules themselves: only those that hold networks
+(`marginal_value`, `parameterization_net`) load torch."""

@@ -10,12 +10,23 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from paramimic.config import CurriculumConfig, ExperimentConfig
-from paramimic.curriculum.marginal_value import Layers, marginal_function
 from paramimic.curriculum.mcmc import AdaptiveSampler
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
+from paramimic.task_space import TaskSpace
 
 STATE_PARTS = ("core", "buffer", "marginal")
 STAT_FIELDS = ("episodes", "steps", "falls", "diverged", "return_sum", "tasks_served", "batches")
+
+
+def marginal_function(layers: Layers, space: TaskSpace):
+    """V̄ as a numpy function [n, d] -> [n] from exported layers (what the sampler runs MCMC on)."""
+    layers = float32_layers(layers)
+
+    def v_bar(a: np.ndarray) -> np.ndarray:
+        x = space.scaled(a).astype(np.float32)
+        return numpy_forward(layers, x)[:, 0].astype(np.float64)
+
+    return v_bar
 
 
 class AdaptiveCurriculum:
@@ -56,7 +67,7 @@ class AdaptiveCurriculum:
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
         """Take the learner's V̄ and μ; refill S by MCMC if `refill` (every P_MCMC iterations)."""
-        self.layers = [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in layers]
+        self.layers = float32_layers(layers)
         self.mu = float(mu)
         self.marginal_iteration = int(iteration)
         if refill:
@@ -181,8 +192,4 @@ class AdaptiveCurriculum:
         self.stats = dict.fromkeys(STAT_FIELDS, 0) | core.pop("stats")
         self.sampler.from_state(core | {"buffer": state["buffer"]})
         marginal = state["marginal"]
-        self.layers = (
-            None
-            if marginal is None
-            else [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in marginal]
-        )
+        self.layers = None if marginal is None else float32_layers(marginal)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.task_space import TaskSpace
 
 VISITED, SURROUNDING, UNVISITED = "visited", "surrounding", "unvisited"
 
@@ -28,8 +28,7 @@ class Density:
         self.tree = cKDTree(self._normalized(np.asarray(points).reshape(-1, space.dim)))
 
     def _normalized(self, a: np.ndarray) -> np.ndarray:
-        a = np.atleast_2d(np.asarray(a, np.float64))
-        return ((a - self.space.low) / np.where(self.free, self.space.width, 1.0))[:, self.free]
+        return self.space.normalize(a)[:, self.free]
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
         """density at each row of a: [n]. Neighbours beyond 3h add < e⁻⁹ each and are skipped."""

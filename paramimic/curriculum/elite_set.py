@@ -26,15 +26,20 @@ class Offer:
     improved: bool = False
 
 
+@dataclass(frozen=True)
+class EliteRule:
+    """Who enters: fitness above `threshold` and above every neighbour within `radius` (Eq.
+    13, §5.2); an entry beating what it replaced by more than `improvement` counts towards the
+    exploration rate (§6.1)."""
+
+    radius: float = 0.1
+    threshold: float = 0.1
+    improvement: float = 0.02
+
+
 class EliteSet:
     def __init__(
-        self,
-        dim: int,
-        weights: np.ndarray | None = None,
-        radius: float = 0.1,
-        threshold: float = 0.1,
-        improvement: float = 0.02,
-        rebuild_every: int = 256,
+        self, dim: int, weights=None, rule: EliteRule = EliteRule(), rebuild_every: int = 256
     ) -> None:
         self.dim = dim
         self.weights = (
@@ -42,7 +47,7 @@ class EliteSet:
         )  # diag A
         if self.weights.shape != (dim,) or np.any(self.weights < 0):
             raise ValueError("weights must be the non-negative diagonal of A, one per dimension")
-        self.radius, self.threshold, self.improvement = radius, threshold, improvement
+        self.rule = rule
         self.rebuild_every = rebuild_every
         self._params = np.empty((0, dim))  # a per slot (with spare capacity)
         self._fitness = np.empty(0)
@@ -77,7 +82,7 @@ class EliteSet:
 
     def neighbours(self, a: np.ndarray, radius: float | None = None) -> np.ndarray:
         """Live slots with (a − a')ᵀA(a − a') < r² (Eq. 13), sorted."""
-        r = self.radius if radius is None else radius
+        r = self.rule.radius if radius is None else radius
         a = np.asarray(a, np.float64)
         found = []
         if self.tree is not None:
@@ -88,9 +93,18 @@ class EliteSet:
             return slots
         return slots[self._dist2(slots, a) < r * r]  # strict, and exact for the tail
 
-    def nearest(self, a: np.ndarray, k: int) -> np.ndarray:
-        """The k live slots nearest to `a` in the A-metric, nearest first."""
+    def distance(self, slots: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """√((a − a')ᵀA(a − a')) from `a` to the elites in `slots`: [len(slots)]."""
+        return np.sqrt(self._dist2(np.asarray(slots, np.int64), np.asarray(a, np.float64)))
+
+    def nearest(self, a: np.ndarray, k: int, among: np.ndarray | None = None) -> np.ndarray:
+        """The k live slots nearest to `a` in the A-metric, nearest first (only those in
+        `among` if given)."""
         a = np.asarray(a, np.float64)
+        if among is not None:
+            slots = np.asarray(among, np.int64)
+            slots = slots[self.alive[slots]]
+            return slots[np.argsort(self._dist2(slots, a), kind="stable")[:k]]
         candidates = list(range(self.n_tree, len(self.keys)))
         if self.tree is not None:
             dead = self.n_tree - int(self.alive[: self.n_tree].sum())
@@ -103,8 +117,10 @@ class EliteSet:
         order = np.argsort(self._dist2(slots, a), kind="stable")
         return slots[order[:k]]
 
-    def within_box(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """Live slots with low <= a <= high."""
+    def within_box(self, low: np.ndarray | None, high: np.ndarray | None) -> np.ndarray:
+        """Live slots with low <= a <= high (None: unbounded on that side)."""
+        low = np.full(self.dim, -np.inf) if low is None else low
+        high = np.full(self.dim, np.inf) if high is None else high
         inside = np.all((self.params >= low) & (self.params <= high), axis=1) & self.alive
         return np.flatnonzero(inside)
 
@@ -116,12 +132,13 @@ class EliteSet:
     def offer(self, a: np.ndarray, fitness: float, key: str) -> Offer:
         """[L21] §5.2: enter if F > threshold and F > F' of every neighbour; replace them."""
         a = np.asarray(a, np.float64).reshape(self.dim)
-        if not fitness > self.threshold:
+        if not fitness > self.rule.threshold:
             return Offer(False)
         near = self.neighbours(a)
         if len(near) and not np.all(fitness > self.fitness[near]):
             return Offer(False)
-        improved = not len(near) or bool(np.all(fitness - self.fitness[near] > self.improvement))
+        margin = self.rule.improvement
+        improved = not len(near) or bool(np.all(fitness - self.fitness[near] > margin))
         replaced = [self.keys[s] for s in near]
         self.alive[near] = False
         self._insert(a, fitness, key)

@@ -10,28 +10,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from paramimic.curriculum.task_space import TaskSpace
-from paramimic.rl.networks import mlp, numpy_forward, numpy_layers
-
-Layers = list[tuple[np.ndarray, np.ndarray]]
-
-
-def scale_tasks(space: TaskSpace, a: np.ndarray) -> np.ndarray:
-    """Task parameters mapped to [-1, 1] per free dimension (fixed ones to 0): [n, d]."""
-    width = np.where(space.width > 0, space.width, 1.0)
-    x = 2.0 * (np.asarray(a, dtype=np.float64) - space.low) / width - 1.0
-    return np.where(space.width > 0, x, 0.0)
-
-
-def marginal_function(layers: Layers, space: TaskSpace):
-    """V̄ as a numpy function [n, d] -> [n] from exported layers (what the sampler runs MCMC on)."""
-    layers = [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in layers]
-
-    def v_bar(a: np.ndarray) -> np.ndarray:
-        x = scale_tasks(space, np.atleast_2d(a)).astype(np.float32)
-        return numpy_forward(layers, x)[:, 0].astype(np.float64)
-
-    return v_bar
+from paramimic.rl.networks import mlp, numpy_layers
+from paramimic.rl.numpy_mlp import Layers
+from paramimic.task_space import TaskSpace
 
 
 class MarginalValue:
@@ -56,10 +37,10 @@ class MarginalValue:
         self.fitted = False
 
     def _scaled(self, a: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(scale_tasks(self.space, a), dtype=torch.float32)
+        return torch.as_tensor(self.space.scaled(a), dtype=torch.float32)
 
     def layers(self) -> Layers:
-        """The network's weights as numpy (W, b) pairs, for `marginal_function`."""
+        """The network's weights as numpy (W, b) pairs, for `adaptive.marginal_function`."""
         return numpy_layers(self.net)
 
     def predict(self, a: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.task_space import TaskSpace
 
 MarginalFn = Callable[[np.ndarray], np.ndarray]  # [n, d] -> V̄ [n]
 

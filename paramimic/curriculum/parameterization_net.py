@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from paramimic.curriculum.marginal_value import scale_tasks
-from paramimic.curriculum.task_space import TaskSpace
 from paramimic.rl.networks import mlp, numpy_layers
+from paramimic.task_space import TaskSpace
 
 
 class ParameterizationNet:
@@ -32,14 +31,14 @@ class ParameterizationNet:
 
     def predict(self, a: np.ndarray) -> np.ndarray:
         """P_θ(a) for a batch [n, d] -> traces [n, T + 1, D + 1]."""
-        x = torch.as_tensor(scale_tasks(self.space, np.atleast_2d(a)), dtype=torch.float32)
+        x = torch.as_tensor(self.space.scaled(a), dtype=torch.float32)
         with torch.no_grad():
             return self.net(x).numpy().reshape(-1, *self.trace_shape).astype(np.float64)
 
     def fit(self, params: np.ndarray, traces: np.ndarray, steps: int) -> float:
         """`steps` minibatch updates of Eq. 12 on elite (a, trace) pairs; returns the mean loss
         per trace of the last one."""
-        x_all = torch.as_tensor(scale_tasks(self.space, params), dtype=torch.float32)
+        x_all = torch.as_tensor(self.space.scaled(params), dtype=torch.float32)
         y_all = torch.tensor(np.asarray(traces, np.float32).reshape(len(params), -1))
         for _ in range(steps):
             idx = self.rng.integers(0, len(params), size=min(self.batch_size, len(params)))

@@ -16,12 +16,12 @@ Pure and serialisable like `AdaptiveCurriculum`, whose V̄, μ, k and counters i
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
 from paramimic.config import CurriculumConfig, ExperimentConfig
-from paramimic.curriculum.adaptive import AdaptiveCurriculum
+from paramimic.curriculum.adaptive import AdaptiveCurriculum, marginal_function
 from paramimic.curriculum.density import (
     SURROUNDING,
     VISITED,
@@ -30,12 +30,11 @@ from paramimic.curriculum.density import (
     explored_ratio,
     sample_band,
 )
-from paramimic.curriculum.elite_set import EliteSet, Offer
+from paramimic.curriculum.elite_set import EliteRule, EliteSet, Offer
 from paramimic.curriculum.knn_proxy import knn_proxy
-from paramimic.curriculum.marginal_value import Layers, marginal_function, scale_tasks
 from paramimic.curriculum.mcmc import metropolis_hastings, surrogate_log_density
-from paramimic.curriculum.task_space import TaskSpace
-from paramimic.rl.networks import numpy_forward
+from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
+from paramimic.task_space import TaskSpace
 
 STAGES = ("base", "proxy", "mixed")
 HISTORY = 1000  # (N, ER) points kept
@@ -57,12 +56,9 @@ class SkillCurriculum(AdaptiveCurriculum):
     ) -> None:
         super().__init__(space, config, seed, display_dims)
         self.sc = sc = config.skill
-        free = space.width > 0
-        # A = diag(1/width²) on free dimensions: distances on the normalized box
-        self.metric = np.where(free, 1.0 / np.where(free, space.width, 1.0) ** 2, 0.0)
-        self.elites = EliteSet(
-            space.dim, self.metric, sc.elite_radius, sc.fitness_threshold, sc.improvement
-        )
+        self.metric = space.metric  # distances on the normalized box
+        rule = EliteRule(sc.elite_radius, sc.fitness_threshold, sc.improvement)
+        self.elites = EliteSet(space.dim, self.metric, rule)
         self.traces: dict[str, np.ndarray] = {}
         self.added: dict[str, np.ndarray] = {}  # traces changed since `drain_traces`
         self.removed: set[str] = set()
@@ -82,15 +78,16 @@ class SkillCurriculum(AdaptiveCurriculum):
         self._density: Density | None = None
 
     @classmethod
-    def from_config(cls, cfg: ExperimentConfig, trace_shape=None, reference=None):
-        if trace_shape is None or reference is None:
-            from paramimic.envs.skill_env import SkillEnv
-
-            probe = SkillEnv(cfg.character, cfg.task, cfg.env)
-            trace_shape, reference = probe.trace_shape, probe.reference_task()
-            for name, value in cfg.curriculum.skill.reference.items():
-                reference[probe.task_space.names.index(name)] = value
+    def from_config(
+        cls, cfg: ExperimentConfig, trace_shape: Sequence[int], reference: Sequence[float]
+    ) -> SkillCurriculum:
+        """The curriculum of an experiment; the clip's trace shape and its parameter a0 come
+        from the env layer (`paramimic.envs.skill_env.clip_setup`), the config's
+        `curriculum.skill.reference` overriding entries of a0."""
         space = TaskSpace.from_ranges(cfg.task)
+        reference = np.array(reference, np.float64)
+        for name, value in cfg.curriculum.skill.reference.items():
+            reference[space.names.index(name)] = value
         return cls(
             space,
             cfg.curriculum,
@@ -208,7 +205,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         if self.stage == "mixed" and self.motion_layers is not None:
             use_net = self.rng.random(len(tasks)) < 0.5
             if use_net.any():
-                x = scale_tasks(self.space, tasks[use_net])
+                x = self.space.scaled(tasks[use_net])
                 out[use_net] = numpy_forward(self.motion_layers, x).reshape(-1, *self.trace_shape)
         return out
 
@@ -282,9 +279,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         if stage not in STAGES:
             raise ValueError(f"stage must be one of {STAGES}, got {stage!r}")
         if layers is not None:
-            self.motion_layers = [
-                (np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in layers
-            ]
+            self.motion_layers = float32_layers(layers)
         self.motion_version, self.motion_loss = int(version), loss
         self.stage = stage
 
@@ -389,18 +384,21 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.elites.from_state(state["elites"])
         m = state["motion"]
         self.motion_version, self.motion_loss = int(m["version"]), m["loss"]
-        self.motion_layers = (
-            None
-            if m["layers"] is None
-            else [(np.asarray(w, np.float32), np.asarray(b, np.float32)) for w, b in m["layers"]]
-        )
+        self.motion_layers = None if m["layers"] is None else float32_layers(m["layers"])
         self.traces = {k: np.asarray(v, np.float64) for k, v in state["traces"].items()}
         self.added, self.removed = {}, set()
         self._density = None
 
 
-def new_curriculum(cfg: ExperimentConfig) -> AdaptiveCurriculum:
-    """The curriculum an experiment runs: [L21] with a clip, else [WL19] adaptive sampling."""
-    if cfg.env.clip is not None:
-        return SkillCurriculum.from_config(cfg)
-    return AdaptiveCurriculum.from_config(cfg)
+def new_curriculum(cfg: ExperimentConfig, clip: Mapping | None = None) -> AdaptiveCurriculum:
+    """The curriculum an experiment runs: [L21] with a clip, else [WL19] adaptive sampling.
+    `clip` ({"trace_shape", "reference"}, from `paramimic.envs.skill_env.clip_setup`) is what
+    the [L21] curriculum needs to know of the clip without building an env."""
+    if cfg.env.clip is None:
+        return AdaptiveCurriculum.from_config(cfg)
+    if clip is None:
+        raise ValueError(
+            "the [L21] curriculum needs the clip's trace shape and reference a0: "
+            "pass clip=paramimic.envs.skill_env.clip_setup(cfg)"
+        )
+    return SkillCurriculum.from_config(cfg, clip["trace_shape"], clip["reference"])

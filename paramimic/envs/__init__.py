@@ -1,43 +1,61 @@
-"""ParamEnv and its gymnasium registrations (`paramimic/WalkerLegs-v0`, ...)."""
+"""The family environments and their gymnasium registrations: `paramimic/<Name>-v0` for every
+registered character (its [WL19] gait, or its first [L21] clip), one env per clip
+(`paramimic/WalkerPlanarJump-v0`, `paramimic/HumanoidBackflip-v0`, ...) and the extra task
+spaces a registration names (`paramimic/WalkerLegs-v0`, ...)."""
+
+from collections.abc import Mapping
 
 import gymnasium as gym
 
+from paramimic import characters
+from paramimic.config import EnvConfig
 from paramimic.envs.param_env import REWARD_TERMS, ParamEnv
 from paramimic.envs.skill_env import SkillEnv
 
-_ENTRY = "paramimic.envs.param_env:ParamEnv"
-_LEGS = (0.7, 1.3)
 
-# name -> (character, task space)
-REGISTERED = {
-    "paramimic/Walker-v0": ("walker", {"target_velocity": (1.0, 1.0)}),
-    "paramimic/WalkerLegs-v0": (
-        "walker",
-        {"left_leg_length": _LEGS, "right_leg_length": _LEGS, "target_velocity": (1.0, 1.0)},
-    ),
-    "paramimic/Hopper-v0": ("hopper", {"target_velocity": (1.0, 1.0)}),
-    "paramimic/HopperShape-v0": (
-        "hopper",
-        {"leg_length": _LEGS, "torso_length": (0.8, 1.2), "target_velocity": (1.0, 1.0)},
-    ),
-}
+def make_env(
+    character: str,
+    task: Mapping | None = None,
+    env_config: EnvConfig | Mapping | None = None,
+) -> ParamEnv | SkillEnv:
+    """The environment of an experiment: the continuous-time SkillEnv ([L21]) when `env.clip`
+    names a clip, else ParamEnv ([WL19] gaits)."""
+    cfg = (
+        env_config
+        if isinstance(env_config, EnvConfig)
+        else EnvConfig.model_validate(env_config or {})
+    )
+    env = SkillEnv if cfg.clip else ParamEnv
+    return env(character=character, task=task, config=cfg)
+
+
+def registered_envs() -> dict[str, dict]:
+    """Gymnasium id -> kwargs of every registered character's envs."""
+    return {k: v for r in characters.REGISTRY.values() for k, v in r.env_specs().items()}
 
 
 def register_envs() -> None:
-    for env_id, (character, task) in REGISTERED.items():
+    """Register the gymnasium envs of every character in the registry (idempotent)."""
+    for env_id, kwargs in registered_envs().items():
         if env_id not in gym.registry:
-            gym.register(env_id, entry_point=_ENTRY, kwargs={"character": character, "task": task})
+            gym.register(env_id, entry_point="paramimic.envs:make_env", kwargs=kwargs)
+
+
+def register(registration: characters.Registration) -> characters.Registration:
+    """Add a character at run time: to the registry, and its envs to gymnasium."""
+    characters.register(registration)
+    register_envs()
+    return registration
 
 
 register_envs()
 
-
-def make_env(character: str, task: dict, env_config) -> ParamEnv | SkillEnv:
-    """The environment of an experiment: the continuous-time SkillEnv ([L21]) when `env.clip`
-    names a clip, else ParamEnv ([WL19] gaits)."""
-    if getattr(env_config, "clip", None):
-        return SkillEnv(character=character, task=task, config=env_config)
-    return ParamEnv(character=character, task=task, config=env_config)
-
-
-__all__ = ["REGISTERED", "REWARD_TERMS", "ParamEnv", "SkillEnv", "make_env", "register_envs"]
+__all__ = [
+    "REWARD_TERMS",
+    "ParamEnv",
+    "SkillEnv",
+    "make_env",
+    "register",
+    "register_envs",
+    "registered_envs",
+]

@@ -13,194 +13,102 @@ while meeting the task goals. Observation, action and reward follow [WL19] §3.2
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
-from paramimic.characters import Character, compile_character, get_character
-from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
-from paramimic.config import TASK_GOALS, EnvConfig
-from paramimic.curriculum.task_space import TaskSpace
+from paramimic.characters import Body
+from paramimic.envs.core import EnvCore
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
-from paramimic.motion import REFERENCE_MOTIONS
+from paramimic.envs.rewards import (
+    WL19Terms,
+    wl19_imitation,
+    wl19_regularization,
+    wl19_reward,
+    wl19_task,
+    wl19_weights,
+)
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-# MuJoCo's warnings for a bad qpos, qvel or qacc (it resets the state when one fires)
-INSTABILITY = slice(
-    int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQACC) + 1
-)
-MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
+REWARD_TERMS = ("pose", "velocity", "end_effector", "com_velocity", "direction", "torque", "task")
 
 
-@lru_cache(maxsize=32)
-def _compiled(character: str, shape: tuple[tuple[str, float], ...]) -> Character:
-    return compile_character(get_character(character), dict(shape))
+class ParamEnv(EnvCore):
+    GOALS = frozenset({"target_velocity", "target_direction"})
 
-
-class ParamEnv(gym.Env):
-    metadata = {"render_modes": [], "render_fps": 30}
-
-    def __init__(
-        self,
-        character: str = "walker",
-        task: Mapping[str, tuple[float, float]] | None = None,
-        config: EnvConfig | Mapping[str, Any] | None = None,
-    ) -> None:
-        self.definition = get_character(character)
-        self.config = (
-            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
-        )
-        task = dict(task or {})
-        allowed = set(self.definition.param_names()) | set(TASK_GOALS)
-        unknown = set(task) - allowed
-        if unknown:
-            raise ValueError(
-                f"unknown task parameters {sorted(unknown)} for {character!r}; "
-                f"allowed: {sorted(allowed)}"
-            )
-        self.task_space = TaskSpace.from_ranges(task)
-        self._shape_idx = [
-            (n, i)
-            for i, n in enumerate(self.task_space.names)
-            if n in self.definition.param_names()
-        ]
-        names = self.task_space.names
-        self._velocity_idx = names.index("target_velocity") if "target_velocity" in names else None
-        self._direction_idx = (
-            names.index("target_direction") if "target_direction" in names else None
-        )
-        self.motion = REFERENCE_MOTIONS[character] if self.config.imitation else None
-        joint_names = tuple(j.name for j in self.definition.joints)
-        if self.motion is not None and self.motion.joints != joint_names:
-            raise ValueError(f"reference motion joints {self.motion.joints} != {joint_names}")
-        self.frame_skip = self.config.frame_skip
+    def _setup(self) -> None:
+        self._velocity_idx = self.goal_index("target_velocity")
+        self._direction_idx = self.goal_index("target_direction")
+        gait = self.registration.gait
+        if self.config.imitation and gait is None:
+            raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
+        self.motion = gait if self.config.imitation else None
         self._action_scale = self.config.action_scale
         self._min_up = math.cos(self.config.max_pitch)  # the root's z axis may tilt this far
-        self.character: Character
-        self.model: mujoco.MjModel
-        self.data: mujoco.MjData
-        self._load(self.task_space.center)
+        self._free = not self.definition.planar
+        self._height_offset = 0.0  # set per body: planar roots slide relative to build height
+        self._scales = RewardScales.identity()
         self._layout()
+        self._load(self.task_space.center)
         self.dt = self.model.opt.timestep * self.frame_skip
         self._max_steps = int(round(self.config.max_episode_seconds / self.dt))
         self._window = max(1, int(round(self.config.com_velocity_window / self.dt)))
-        self._task = self.task_space.center.copy()
-        nu = len(joint_names)
+        nu = len(self.definition.joints)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (nu,), np.float32)
         self._init_state(np.random.default_rng(0), phase=0.0)
-        self._last_obs = None
         obs = self._observe()
+        self._last_obs = obs
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, obs.shape, np.float32)
 
     # --- body ---------------------------------------------------------------------------------
 
-    def _load(self, task: np.ndarray) -> None:
-        shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
-        c = _compiled(self.definition.name, shape)
-        if getattr(self, "character", None) is c:
-            return
-        self.character = c
-        self.model = c.model
-        # Sensors are evaluated once per control step (`_sense`), not in each of the physics steps.
-        c.model.opt.disableflags |= SENSOR_OFF
-        self._flags_sensing = c.model.opt.disableflags & ~SENSOR_OFF
-        self._flags_stepping = c.model.opt.disableflags
-        self._opt = c.model.opt
-        self.data = mujoco.MjData(c.model)
-        # Root: planar (slide x, slide z relative to the build height, pitch) or free (x y z, quat)
-        self._free = c.model.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
-        self._height_adr, self._height_offset = (2, 0.0) if self._free else (1, c.hip_height)
-        self._swims = bool(getattr(self.definition, "swims", False))
-        self._fall_height = self.config.fall_height_ratio * c.hip_height
-        self._height_joint = 0 if self._free else c.model.joint("rootz").id
-        base = _compiled(self.definition.name, ())
-        if getattr(self, "_base", None) is not base:
-            self._base, self._base_data = base, mujoco.MjData(base.model)
+    def _layout(self) -> None:
+        """Sensor indices of the reward and observation and the weights of Eq. 4: the same for
+        every shape (sensordata: q [nj], dq [nj], end-effectors [3 n_ee], τ [nj], up, COM)."""
+        base, rc = self._base, self.config.reward
+        nj, n_ee = len(base.qpos_idx), len(base.ee_site_ids)
+        self._nj, self._n_ee = nj, n_ee
+        self._q = slice(0, nj)
+        self._dq = slice(nj, 2 * nj)
+        self._ee = slice(2 * nj, 2 * nj + 3 * n_ee)
+        self._weights = wl19_weights(
+            rc.w_pose,
+            rc.w_velocity,
+            rc.w_end_effector,
+            rc.w_com_velocity,
+            rc.w_direction,
+            rc.w_torque,
+            n_ee,
+            imitation=self.motion is not None,
+        )
+        # observed sensordata: joints, end-effectors and the up vector, in the sagittal plane
+        # (x, z) for planar bodies, all of x, y, z for free ones
+        axes = [0, 1, 2] if self._free else [0, 2]
+        ee = np.arange(base.ee_sensor.start, base.ee_sensor.stop).reshape(n_ee, 3)[:, axes]
+        up = base.up_sensor.start + np.array(axes)
+        self._obs_sensors = np.concatenate([np.arange(2 * nj), ee.ravel(), up])
+        self._root_velocity = slice(0, 6) if self._free else slice(0, 3)
+        self._zero_reference = np.zeros(2 * nj + 3 * n_ee)
+
+    def _bind(self, body: Body) -> None:
+        super()._bind(body)
+        # Sensors are evaluated once per control step (`_sense`), not in each physics step.
+        body.model.opt.disableflags |= SENSOR_OFF
+        self._flags_sensing = body.model.opt.disableflags & ~SENSOR_OFF
+        self._flags_stepping = body.model.opt.disableflags
+        self._opt = body.model.opt
+        self._height_offset = 0.0 if self._free else body.hip_height
+        self._fall_height = self.config.fall_height_ratio * body.hip_height
+        base = self._base
         self._scales = (
-            reward_scales(c.leg_lengths, base.leg_lengths, c.mass, base.mass)
+            reward_scales(body.leg_lengths, base.leg_lengths, body.mass, base.mass)
             if self.config.reward.normalize
             else RewardScales.identity()
         )
-        if hasattr(self, "_block_exponent_base"):
-            self._scale_energy()
-        self._max_qvel_sq = c.model.nv * MAX_SPEED**2
         self._reference = self._tabulate_reference() if self.motion is not None else None
-
-    def _layout(self) -> None:
-        """Index and weight arrays of the reward and observation; the same for every shape."""
-        c = self.character
-        n_ee = len(c.ee_site_ids)
-        rc = self.config.reward
-        nj = len(c.qpos_idx)
-        # Bells of Eq. 5-7 in sensordata order: pose, joint velocity, each end-effector, torque,
-        # then COM velocity and direction. Weights w1..w6 (Table 3) and 1/(σ dim(x)).
-        w = np.array(
-            [
-                rc.w_pose,
-                rc.w_velocity,
-                *[rc.w_end_effector] * n_ee,
-                rc.w_torque,
-                rc.w_com_velocity,
-                rc.w_direction,
-            ]
-        )
-        if self.motion is None:
-            w[: 2 + n_ee] = 0.0
-        sigma = np.array(
-            [
-                rc.sigma_pose,
-                rc.sigma_velocity,
-                *[rc.sigma_end_effector] * n_ee,
-                rc.sigma_torque,
-                rc.sigma_com_velocity,
-                rc.sigma_direction,
-            ]
-        )
-        dims = np.array([nj, nj, *[3] * n_ee, nj, 2, 2], dtype=np.float64)
-        w = w / w.sum()  # every step's reward lies in (0, 1]
-        exponent = -1.0 / (sigma * dims)  # bell = exp(‖x‖² · exponent) = exp(-‖x‖²_D / σ)
-        self._nj = nj
-        # The sensordata block q, dq, ee, τ: squared entries -> exponent of each of its bells
-        # (torques relative to their limits), one matrix product per step.
-        self._block = slice(0, c.tau_sensor.stop)
-        groups = [0] * nj + [1] * nj + [2 + i for i in range(n_ee) for _ in range(3)]
-        groups += [2 + n_ee] * nj
-        nb = 3 + n_ee
-        scale_sq = np.concatenate([np.ones(2 * nj + 3 * n_ee), 1.0 / c.torque_limit**2])
-        block_exponent = np.zeros((len(groups), nb))
-        block_exponent[np.arange(len(groups)), groups] = scale_sq * exponent[groups]
-        self._block_exponent_base = block_exponent
-        self._torque_rows = slice(len(groups) - nj, len(groups))
-        self._scale_energy()
-        self._w_block = w[:nb]
-        self._zero_reference = np.zeros(len(groups))
-        # block bells -> reported terms: pose, velocity, Σ end-effector, (COM velocity,
-        # direction: set per step), torque, (task)
-        tm = np.zeros((nb, len(REWARD_TERMS)))
-        tm[0, 0] = tm[1, 1] = 1.0
-        tm[2 : 2 + n_ee, 2] = 1.0
-        tm[2 + n_ee, 5] = 1.0
-        self._term_matrix = tm
-        self._w_com, self._w_dir = float(w[nb]), float(w[nb + 1])
-        self._exp_com, self._exp_dir = float(exponent[nb]), float(exponent[nb + 1])
-        # sensordata entries the observation reads: joints, end-effectors and the up vector, in
-        # the sagittal plane (x, z) for planar bodies, all of x, y, z for free ones
-        axes = [0, 1, 2] if self._free else [0, 2]
-        ee = np.arange(c.ee_sensor.start, c.ee_sensor.stop).reshape(n_ee, 3)[:, axes].ravel()
-        up = c.up_sensor.start + np.array(axes)
-        self._obs_sensors = np.concatenate([np.arange(2 * nj), ee, up])
-        self._root_velocity = slice(0, 6) if self._free else slice(0, 3)
-
-    def _scale_energy(self) -> None:
-        """[WL19] Table 1: the torque (energy) bell's exponent × m0/m for this body."""
-        e = self._block_exponent_base.copy()
-        e[self._torque_rows] *= self._scales.energy
-        self._block_exponent = e
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
@@ -240,21 +148,8 @@ class ParamEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        task = (options or {}).get("task")
-        if task is None:
-            a = self.task_space.sample(self.np_random, 1)[0]
-        else:
-            a = (
-                self.task_space.from_dict(task)
-                if isinstance(task, Mapping)
-                else np.asarray(task, dtype=np.float64).reshape(-1)
-            )
-            if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
-                raise ValueError(
-                    f"task {a} is not inside the task space {self.task_space.ranges()}"
-                )
-        self._task = a
-        self._load(a)
+        self._task = self.task_from_options(options)
+        self._load(self._task)
         self._init_state(self.np_random, phase=float(self.np_random.random()))
         obs = self._observe()
         self._last_obs = obs
@@ -283,10 +178,9 @@ class ParamEnv(gym.Env):
         mujoco.mj_forward(m, d)
         self._sense()
         self._steps = 0
-        self._unstable = int(d.warning.number[INSTABILITY].sum())
+        self._watch_stability()
         self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
         self._com_vel = (0.0, 0.0, 0.0)
-        self._next_reference = None
 
     def _set_targets(self) -> None:
         """Target speed and direction of the task, normalized for the body ([WL19] Table 1)."""
@@ -306,61 +200,15 @@ class ParamEnv(gym.Env):
         self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
         self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
 
-    def ground_posture(self, qpos: np.ndarray) -> np.ndarray:
-        """The initial posture on the ground. A body other than the base is fitted by [WL19]
-        Eq. 1 to the base body's contact points in the same pose; the base (or a failed fit)
-        is moved vertically until its lowest foot point touches."""
-        c = self.character
-        if self.config.ground_fit and c.shape != self._base.shape:
-            base, bd = self._base, self._base_data
-            bd.qpos[:] = lift_to_ground(
-                base.model, bd, qpos, base.contact_site_ids, self._height_adr
-            )
-            mujoco.mj_kinematics(base.model, bd)
-            targets = bd.site_xpos[base.contact_site_ids]
-            joints = c.model.actuator_trnid[:, 0]
-            return fit_ground_contact(
-                c.model, self.data, qpos, targets, c.contact_site_ids, self._height_joint, joints
-            ).qpos
-        return lift_to_ground(c.model, self.data, qpos, c.contact_site_ids, self._height_adr)
-
-    def set_shape(self, shape: Mapping[str, float]) -> np.ndarray:
-        """Change the body mid-episode ([WL19] §5.2): rebuild the model for the new shape, copy
-        joint positions, velocities and controls, lift the body out of the ground if its limbs
-        grew, and carry on from the same state and phase. The shape parameters must be task
-        dimensions (the policy observes them). Returns the new observation."""
-        a = self._task.copy()
-        shape_dims = dict(self._shape_idx)
-        for name, value in shape.items():
-            if name not in shape_dims:
-                raise ValueError(
-                    f"{name!r} is not a shape dimension of this task space; "
-                    f"shape dimensions: {sorted(shape_dims)}"
-                )
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
-            a[shape_dims[name]] = float(value)
-        old, c = self.data, self.character
-        com_before = old.sensordata[c.com_sensor].copy()
-        self._task = a
-        self._load(a)
-        c, d, m = self.character, self.data, self.model
-        d.qpos[:], d.qvel[:], d.ctrl[:] = old.qpos, old.qvel, old.ctrl
-        d.time = old.time
-        mujoco.mj_forward(m, d)
-        depth = -min((d.contact.dist[i] for i in range(d.ncon)), default=0.0)
-        if depth > 0:  # lift until no penetration
-            d.qpos[self._height_adr] += depth + 1e-4
-            mujoco.mj_forward(m, d)
+    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
+        """Targets follow the new body; the average COM velocity continues: its history shifts
+        by the COM's jump."""
         self._sense()
-        self._unstable = int(d.warning.number[INSTABILITY].sum())
         self._set_targets()
-        # the average COM velocity continues: shift its history by the COM's jump
-        shift = d.sensordata[c.com_sensor] - com_before
+        shift = (
+            self.data.sensordata[self.character.com_sensor] - old.sensordata[body_before.com_sensor]
+        )
         self._com = [tuple((np.array(p) + shift).tolist()) for p in self._com]
-        obs = self._observe()
-        self._last_obs = obs
-        return obs
 
     # --- step ---------------------------------------------------------------------------------
 
@@ -371,36 +219,21 @@ class ParamEnv(gym.Env):
         a = np.minimum(np.maximum(action, -1.0), 1.0) * self._action_scale
         ref = None
         if self._reference is not None:
-            ref = self._next_reference  # looked up by the previous observation at this phase
+            ref = self._reference_at(self._phase)
             a += ref[: self._nj]
         d.ctrl[:] = a
         mujoco.mj_step(self.model, d, nstep=self.frame_skip)
         self._sense()
         self._steps += 1
-
-        # [WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` seconds.
-        cx, cy, cz = com = d.sensordata[c.com_sensor].tolist()
-        ring = self._com
-        elapsed = self._steps if self._steps < self._window else self._window
-        ox, oy, oz = ring[(self._steps - elapsed) % len(ring)]
-        inv = 1.0 / (elapsed * self.dt)
-        self._com_vel = ((cx - ox) * inv, (cy - oy) * inv, (cz - oz) * inv)
-        ring[self._steps % len(ring)] = com
-
-        # A diverging simulation ends the episode, never the run: NaN or exploding velocities,
-        # or MuJoCo's own reset of the state on a bad qpos, qvel or qacc.
-        qvel = d.qvel
-        if (
-            not qvel @ qvel < self._max_qvel_sq
-            or d.warning.number[INSTABILITY].sum() > self._unstable
-        ):
+        self._update_com_velocity()
+        if self.diverging():
             return self._diverged()
         reward, terms = self._reward(ref)
         obs = self._observe()
         self._last_obs = obs
         height = d.qpos[self._height_adr] + self._height_offset
         tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
-        fell = not self._swims and bool(height < self._fall_height or tilted)
+        fell = not self.definition.swims and bool(height < self._fall_height or tilted)
         truncated = self._steps >= self._max_steps and not fell
         info = {
             "task": self._task.copy(),
@@ -411,6 +244,16 @@ class ParamEnv(gym.Env):
             "reward_terms": terms,
         }
         return obs, reward, fell, truncated, info
+
+    def _update_com_velocity(self) -> None:
+        """[WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` s."""
+        cx, cy, cz = com = self.data.sensordata[self.character.com_sensor].tolist()
+        ring = self._com
+        elapsed = self._steps if self._steps < self._window else self._window
+        ox, oy, oz = ring[(self._steps - elapsed) % len(ring)]
+        inv = 1.0 / (elapsed * self.dt)
+        self._com_vel = ((cx - ox) * inv, (cy - oy) * inv, (cz - oz) * inv)
+        ring[self._steps % len(ring)] = com
 
     def _diverged(self) -> tuple:
         info = {
@@ -433,30 +276,50 @@ class ParamEnv(gym.Env):
         opt.disableflags = self._flags_stepping
 
     def _reward(self, ref: np.ndarray | None) -> tuple[float, dict[str, float]]:
-        """[WL19] Eq. 4-7: R = R_imit + R_task + R_reg, ‖x‖²_D = ‖x‖²/dim(x), each term a bell."""
-        d = self.data
-        sq = d.sensordata[self._block] - (self._zero_reference if ref is None else ref)
-        sq *= sq
-        bells = np.exp(sq @ self._block_exponent)  # Eq. 5 pose, velocity, each ee; Eq. 7 τ
-        terms = (bells @ self._term_matrix).tolist()
-        vx, vy, _ = self._com_vel
-        vx -= self._target_vel[0]
-        vy -= self._target_vel[1]
-        terms[3] = math.exp((vx * vx + vy * vy) * self._exp_com)  # Eq. 6: COM velocity
-        # Eq. 6: facing direction d (the root's x axis in the ground plane) against d′, the
-        # error scaled by the body's leg symmetry ([WL19] Table 1)
-        xmat = d.xmat[self.character.root_body_id]
+        """[WL19] Eq. 4-7 on this step's sensors (`rewards.py`); reports each term."""
+        c, d, rc = self.character, self.data, self.config.reward
+        s = d.sensordata
+        n = self._ee.stop
+        err = s[:n] - (self._zero_reference[:n] if ref is None else ref[:n])
+        pose, velocity, ee = wl19_imitation(
+            err[self._q],
+            err[self._dq],
+            err[self._ee].reshape(self._n_ee, 3),
+            rc.sigma_pose,
+            rc.sigma_velocity,
+            rc.sigma_end_effector,
+        )
+        # facing direction d: the root's x axis in the ground plane, against d′
+        xmat = d.xmat[c.root_body_id]
         fx, fy = xmat[0], xmat[3]
         norm = math.hypot(fx, fy) or 1.0
-        ex, ey = fx / norm - self._target_dir[0], fy / norm - self._target_dir[1]
-        terms[4] = math.exp(self._scales.direction * (ex * ex + ey * ey) * self._exp_dir)
-        terms[6] = self._w_com * terms[3] + self._w_dir * terms[4]  # task share of the reward
-        reward = float(bells @ self._w_block) + terms[6]
-        return reward, dict(zip(REWARD_TERMS, terms, strict=True))
+        vx, vy, _ = self._com_vel
+        com, direction = wl19_task(
+            (vx - self._target_vel[0], vy - self._target_vel[1]),
+            (fx / norm - self._target_dir[0], fy / norm - self._target_dir[1]),
+            rc.sigma_com_velocity,
+            rc.sigma_direction,
+            self._scales.direction,
+        )
+        torque = wl19_regularization(
+            s[c.tau_sensor], c.torque_limit, rc.sigma_torque, self._scales.energy
+        )
+        terms = WL19Terms(pose, velocity, ee, com, direction, torque)
+        w, n = self._weights, self._n_ee
+        reward = wl19_reward(terms, w)
+        reported = {
+            "pose": pose,
+            "velocity": velocity,
+            "end_effector": float(ee.sum()),
+            "com_velocity": com,
+            "direction": direction,
+            "torque": torque,
+            "task": float(w[2 + n] * com + w[3 + n] * direction),  # the task share of R
+        }
+        return reward, reported
 
     def _observe(self) -> np.ndarray:
         c, d = self.character, self.data
-        phase = self._phase
         vx, _, vz = self._com_vel
         height = d.qpos[self._height_adr] + self._height_offset
         parts = [
@@ -469,21 +332,12 @@ class ParamEnv(gym.Env):
             xmat = d.xmat[c.root_body_id]
             parts.append((xmat[0], xmat[3], xmat[6], *self._target_dir, self._com_vel[1]))
         if self._reference is not None:
-            x = 2.0 * math.pi * phase
+            x = 2.0 * math.pi * self._phase
             parts.append((math.sin(x), math.cos(x)))
-            self._next_reference = self._reference_at(phase + self._dphase)
-            parts.append(self._next_reference[: self._nj])  # next reference pose
+            nxt = self._reference_at(self._phase + self._dphase)
+            parts.append(nxt[: self._nj])  # next reference pose
         return np.concatenate(parts, dtype=np.float32)
-
-    # --- accessors ----------------------------------------------------------------------------
-
-    @property
-    def task(self) -> np.ndarray:
-        return self._task.copy()
 
     @property
     def sim_time(self) -> float:
         return self._steps * self.dt
-
-
-REWARD_TERMS = ("pose", "velocity", "end_effector", "com_velocity", "direction", "torque", "task")

@@ -18,7 +18,6 @@ Reference time φ is counted in control steps (Δφ = 1 is real time).
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -26,12 +25,11 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from paramimic.characters import Character, get_character
-from paramimic.config import EnvConfig
-from paramimic.curriculum.fitness import EpisodeTrace, fitness
-from paramimic.curriculum.task_space import TaskSpace
-from paramimic.envs.param_env import INSTABILITY, MAX_SPEED, _compiled
-from paramimic.motion.clip import Clip
+from paramimic.characters import Body
+from paramimic.config import ExperimentConfig
+from paramimic.envs.core import EnvCore
+from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
+from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
 
 G = 9.81
@@ -39,55 +37,34 @@ CONTACT_HEIGHT = 0.03  # m: an end-effector of m0 this close to the ground is in
 SKILL_TERMS = ("q", "ee", "com", "time", "task")
 
 
-def reference_clip(name: str, definition) -> Clip:
-    """The clip `name` for a character definition (see `paramimic.config.CLIPS`)."""
-    if name == "planar_jump":
-        from paramimic.motion.procedural import planar_jump_clip
-
-        legs = {s.name: s for s in definition.segments}
-        thigh, shin = (legs[n].length for n in definition.legs[0])
-        foot = legs[definition.feet[0]].thickness
-        return planar_jump_clip(tuple(j.name for j in definition.joints), thigh, shin, foot)
-    if name.startswith("humanoid_"):
-        from paramimic.characters.humanoid import humanoid_clip
-
-        return humanoid_clip(name.removeprefix("humanoid_"))
-    raise KeyError(f"unknown clip {name!r}")
+def clip_setup(cfg: ExperimentConfig) -> dict:
+    """What the [L21] curriculum needs to know of an experiment's clip without building an env:
+    {"trace_shape": (bins, D), "reference": a0 as a list}."""
+    return SkillEnv(cfg.character, cfg.task, cfg.env).clip_setup()
 
 
-class SkillEnv(gym.Env):
-    metadata = {"render_modes": [], "render_fps": 30}
+class SkillEnv(EnvCore):
+    GOALS = frozenset({"gravity", "jump_height"})
 
-    def __init__(
-        self,
-        character: str = "walker",
-        task: Mapping[str, tuple[float, float]] | None = None,
-        config: EnvConfig | Mapping[str, Any] | None = None,
-    ) -> None:
-        self.definition = get_character(character)
-        self.config = (
-            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
-        )
+    def _setup(self) -> None:
         if self.config.clip is None:
             raise ValueError("SkillEnv needs env.clip")
+        clips = self.registration.clips
+        if self.config.clip not in clips:
+            raise ValueError(
+                f"clip {self.config.clip!r} does not fit {self.definition.name!r}; "
+                f"it has {sorted(clips)}"
+            )
         self.skill = self.config.skill
-        self.task_space = TaskSpace.from_ranges(dict(task or {}))
-        names = self.task_space.names
-        shape_names = set(self.definition.param_names())
-        unknown = set(names) - shape_names - {"gravity", "jump_height"}
-        if unknown:
-            raise ValueError(f"unknown skill task parameters {sorted(unknown)} for {character!r}")
-        self._shape_idx = [(n, i) for i, n in enumerate(names) if n in shape_names]
-        self._gravity_idx = names.index("gravity") if "gravity" in names else None
-        self._height_idx = names.index("jump_height") if "jump_height" in names else None
-        self.clip = reference_clip(self.config.clip, self.definition)
-        self.frame_skip = self.config.frame_skip
-        base = _compiled(self.definition.name, ())
+        self._gravity_idx = self.goal_index("gravity")
+        self._height_idx = self.goal_index("jump_height")
+        self.clip = clips[self.config.clip]()
+        base = self._base
         self.nj = len(base.qpos_idx)
         self.root_nq = base.model.nq - self.nj  # 3 (planar x, z, pitch) or 7 (free joint)
         self.root_nv = base.model.nv - self.nj
         self._base_hip_height = base.hip_height
-        self.character: Character | None = None
+        self._trace = None
         self._load(self.task_space.center)
         self.dt = self.model.opt.timestep * self.frame_skip
         # reference grid: one row per control step of reference time, φ = 0..n_ref-1
@@ -108,19 +85,11 @@ class SkillEnv(gym.Env):
 
     # --- body and reference ------------------------------------------------------------------
 
-    def _load(self, task: np.ndarray) -> None:
-        shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
-        c = _compiled(self.definition.name, shape)
-        if self.character is not None and self.character is c:
-            return
-        self.character = c
+    def _bind(self, c: Body) -> None:
         self.model = copy.copy(c.model)  # own copy: gravity changes per episode
         self.data = mujoco.MjData(self.model)
         self._scratch = mujoco.MjData(self.model)
-        self._fall_geoms = np.isin(
-            self.model.geom_bodyid, [self.model.body(b).id for b in self.definition.fall_bodies]
-        )
-        self._floor = self.model.geom("floor").id
+        self._index_fall_geoms()
         dt = self.model.opt.timestep * self.frame_skip
         phis = np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt
         pose = self.clip.sample(phis)
@@ -206,24 +175,11 @@ class SkillEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = options or {}
-        task = options.get("task")
-        if task is None:
-            a = self.task_space.sample(self.np_random, 1)[0]
-        else:
-            a = (
-                self.task_space.from_dict(task)
-                if isinstance(task, Mapping)
-                else np.asarray(task, dtype=np.float64).reshape(-1)
-            )
-            if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
-                raise ValueError(
-                    f"task {a} is not inside the task space {self.task_space.ranges()}"
-                )
-        self._task = a
+        self._task = a = self.task_from_options(options)
         self._load(a)
-        g = G * (a[self._gravity_idx] if self._gravity_idx is not None else 1.0)
-        self.model.opt.gravity[:] = (0.0, 0.0, -g)
-        self._set_motion(options.get("motion"))
+        self._set_gravity()
+        self._trace = options.get("motion")
+        self._set_motion(self._trace)
         m, d, c = self.model, self.data, self.character
         mujoco.mj_resetData(m, d)
         noise = self.config.init_noise
@@ -240,8 +196,7 @@ class SkillEnv(gym.Env):
         self._phi = 0.0
         self._steps = 0
         self._x0 = float(d.qpos[0])
-        self._unstable = int(d.warning.number[INSTABILITY].sum())
-        self._max_qvel_sq = m.nv * MAX_SPEED**2
+        self._watch_stability()
         self._peak_com = float(d.subtree_com[c.root_body_id, 2])
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
@@ -262,30 +217,26 @@ class SkillEnv(gym.Env):
         mujoco.mj_step(m, d, nstep=self.frame_skip)
         self._steps += 1
         self._phi = phi_next
-        qvel = d.qvel
-        if (
-            not qvel @ qvel < self._max_qvel_sq
-            or d.warning.number[INSTABILITY].sum() > self._unstable
-        ):
+        if self.diverging():
             return self._end(self._last_obs, 0.0, 0.0, dphi, terminated=True, diverged=True)
         com = d.subtree_com[c.root_body_id]
         self._peak_com = max(self._peak_com, float(com[2]))
         self._record(phi_next, d_joints, tau)
-        terms = self._tracking(phi_next, tau)
-        r_track = self.skill.w_q * terms[0] + self.skill.w_ee * terms[1]
-        r_track += self.skill.w_com * terms[2] + self.skill.w_time * terms[3]
-        reward = self._w_tracking * r_track
+        s = self.skill
+        terms = list(self._tracking(phi_next, tau))
+        r_track = l21_tracking_reward(terms, s.w_q, s.w_ee, s.w_com, s.w_time)  # Eq. 6
+        reward = l21_reward(r_track, 0.0, self._w_tracking, self._w_task)  # Eq. 5, continuous
         obs = self._observe()
         self._last_obs = obs
-        fell = self._fell()
+        fell = self.fall_contact()
         completed = phi_next >= self.length and not fell
         if fell or completed or self._steps >= self._max_steps:
             spike = 0.0
             if completed and self._height_idx is not None:
                 # Eq. 8, a spike paid when the clip (the duration of the jump) ends
-                err = self.jump_height() - self._task[self._height_idx]
-                spike = self._w_task * float(np.exp(-(err**2) / self.skill.sigma_task**2))
-                terms.append(spike / max(self._w_task, 1e-12))
+                r_task = l21_task(self.jump_height() - self._task[self._height_idx], s.sigma_task)
+                spike = l21_reward(0.0, r_task, self._w_tracking, self._w_task)
+                terms.append(r_task)
             return self._end(
                 obs,
                 reward + spike,
@@ -300,7 +251,7 @@ class SkillEnv(gym.Env):
         info = self._info(dphi, 0.0, terms, fell=False)
         return obs, reward, False, False, info
 
-    def _tracking(self, phi: float, tau: float) -> list[float]:
+    def _tracking(self, phi: float, tau: float) -> tuple[float, float, float, float]:
         """r_q, r_ee, r_com, r_time of Eq. 7 against m_a at φ."""
         c, d, s = self.character, self.data, self.skill
         qa = self._at(self._qa, phi)
@@ -309,13 +260,17 @@ class SkillEnv(gym.Env):
         ee = d.site_xpos[c.ee_site_ids] - com
         com_hat = self._at(self._coma, phi).copy()
         com_hat[0] += self._x0
-        dt_hat = np.exp(self._at(self._tau_hat, phi))
-        return [
-            float(np.exp(-(dq @ dq) / s.sigma_q**2)),
-            float(np.exp(-np.sum((ee - self._at(self._eea, phi)) ** 2) / s.sigma_ee**2)),
-            float(np.exp(-np.sum((com - com_hat) ** 2) / s.sigma_com**2)),
-            float(np.exp(-((np.exp(tau) - dt_hat) ** 2) / s.sigma_time**2)),
-        ]
+        dt_hat = float(np.exp(self._at(self._tau_hat, phi)))
+        return l21_tracking(
+            dq,
+            ee - self._at(self._eea, phi),
+            com - com_hat,
+            float(np.exp(tau)) - dt_hat,
+            s.sigma_q,
+            s.sigma_ee,
+            s.sigma_com,
+            s.sigma_time,
+        )
 
     def _record(self, phi: float, d_joints: np.ndarray, tau: float) -> None:
         """Per-step samples for the trace and the fitness against m0 at φ."""
@@ -337,16 +292,6 @@ class SkillEnv(gym.Env):
         rec["slide"].append(np.linalg.norm(xy - self._feet_xy, axis=1))
         self._feet_xy = xy.copy()
 
-    def _fell(self) -> bool:
-        d = self.data
-        for i in range(d.ncon):
-            g1, g2 = d.contact.geom1[i], d.contact.geom2[i]
-            if (g1 == self._floor and self._fall_geoms[g2]) or (
-                g2 == self._floor and self._fall_geoms[g1]
-            ):
-                return True
-        return False
-
     def reference_task(self) -> np.ndarray:
         """a0, the parameter of m0 itself: gravity 1, body scales 1 and the clip's own jump
         height (the COM rise of m0 on the current body), clipped into the task space."""
@@ -354,6 +299,10 @@ class SkillEnv(gym.Env):
         if self._height_idx is not None:
             a[self._height_idx] = self._m0_rise
         return np.clip(a, self.task_space.low, self.task_space.high)
+
+    def clip_setup(self) -> dict:
+        """{"trace_shape": (bins, D), "reference": a0 as a list}: see `clip_setup`."""
+        return {"trace_shape": self.trace_shape, "reference": self.reference_task().tolist()}
 
     def jump_height(self) -> float:
         """Peak rise of the COM above its standing height so far in this episode."""
@@ -456,6 +405,12 @@ class SkillEnv(gym.Env):
             dtype=np.float32,
         )
 
-    @property
-    def task(self) -> np.ndarray:
-        return self._task.copy()
+    def _set_gravity(self) -> None:
+        a = self._task
+        g = G * (a[self._gravity_idx] if self._gravity_idx is not None else 1.0)
+        self.model.opt.gravity[:] = (0.0, 0.0, -g)
+
+    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
+        """m_a is tabulated again on the new body, under the episode's gravity."""
+        self._set_gravity()
+        self._set_motion(self._trace)

@@ -1,5 +1,2 @@
-"""Reference motions: procedural keyframes now; clips, displacement and time warp in [L21]."""
-
-from paramimic.motion.procedural import REFERENCE_MOTIONS, SinusoidalMotion
-
-__all__ = ["REFERENCE_MOTIONS", "SinusoidalMotion"]
+"""Reference motions: procedural keyframes, clip files, displacement ⊕ and time warp ([L21]
+§3), and the fitness of an episode against its reference ([L21] Eq. 10)."""

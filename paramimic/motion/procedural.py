@@ -9,9 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 from scipy.spatial.transform import Rotation
 
-from paramimic.characters.articulated import BIPED_LOWER, FISH, MANTA, QUADRUPED
+from paramimic.motion.clip import Clip
 
 TWO_PI = 2.0 * np.pi
 
@@ -41,113 +42,27 @@ class SinusoidalMotion:
         return (TWO_PI / self.period) * (self.amp1 * np.cos(x) + 2.0 * self.amp2 * np.cos(2.0 * x))
 
 
-def _motion(period: float, rows: dict[str, tuple[float, float, float, float]]) -> SinusoidalMotion:
-    names = tuple(rows)
-    cols = np.array([rows[n] for n in names], dtype=np.float64).T
-    return SinusoidalMotion(names, period, *cols)
+Rows = dict[str, tuple[float, float, float, float]]  # joint -> (offset, a1, a2, phase)
 
 
-# Walking at about 1 m/s: two steps of ~0.5 m per 1 s cycle. The right leg swings forward around
-# φ = 0, the left half a cycle later. Hip flexion is positive forward, knees flex negative and
-# bend most in mid-swing, ankles roll heel to toe.
-WALKER_GAIT = _motion(
-    1.0,
-    {
-        #            offset  a1     a2    phase
-        "hip_r": (0.20, 0.32, 0.00, 0.00),
-        "knee_r": (-0.45, -0.35, 0.05, 0.25),
-        "ankle_r": (0.00, 0.15, 0.00, -0.10),
-        "hip_l": (0.20, 0.32, 0.00, 0.50),
-        "knee_l": (-0.45, -0.35, 0.05, 0.75),
-        "ankle_l": (0.00, 0.15, 0.00, 0.40),
-    },
-)
-
-# Hopping: crouch and extend twice a second, the leg swinging slightly forward in flight.
-HOPPER_GAIT = _motion(
-    0.5,
-    {
-        "hip": (0.35, 0.20, 0.00, 0.00),
-        "knee": (-0.55, -0.35, 0.00, 0.25),
-        "ankle": (0.15, 0.20, 0.00, 0.25),
-    },
-)
+def alternating(rows: Rows, sides: tuple[str, str] = ("r", "l")) -> Rows:
+    """The rows of a two-legged gait from one leg's: joint names hold `{side}`; the first side
+    moves as given, the second half a cycle later."""
+    return {
+        name.format(side=side): (c, a1, a2, phase + 0.5 * k)
+        for k, side in enumerate(sides)
+        for name, (c, a1, a2, phase) in rows.items()
+    }
 
 
-def _gait(
-    joints: tuple[str, ...], period: float, rows: dict[str, tuple[float, float, float, float]]
-) -> SinusoidalMotion:
-    """A motion over all `joints` in their order; joints without a row hold 0."""
+def gait(joints: tuple[str, ...], period: float, rows: Rows) -> SinusoidalMotion:
+    """A motion over all `joints` in their order (a character's actuated joints); joints
+    without a row hold 0."""
     unknown = set(rows) - set(joints)
     if unknown:
         raise KeyError(f"gait rows for unknown joints {sorted(unknown)}")
-    return _motion(period, {j: rows.get(j, (0.0, 0.0, 0.0, 0.0)) for j in joints})
-
-
-def _joint_names(character) -> tuple[str, ...]:
-    return tuple(j.name for j in character.joints)
-
-
-# The lower-body biped walks like the planar walker: hip pitch, knee and ankle pitch per leg,
-# with a little hip roll shifting the weight over the stance leg. The offsets (the mean pose)
-# stand with slightly bent knees and flat feet (hip + knee + ankle = 0).
-BIPED_LOWER_GAIT = _gait(
-    _joint_names(BIPED_LOWER),
-    1.0,
-    {
-        "hip_r_pitch": (0.10, 0.32, 0.00, 0.00),
-        "knee_r": (-0.20, -0.30, 0.05, 0.25),
-        "ankle_r_pitch": (0.10, 0.15, 0.00, -0.10),
-        "hip_r_roll": (0.00, 0.04, 0.00, 0.25),
-        "hip_l_pitch": (0.10, 0.32, 0.00, 0.50),
-        "knee_l": (-0.20, -0.30, 0.05, 0.75),
-        "ankle_l_pitch": (0.10, 0.15, 0.00, 0.40),
-        "hip_l_roll": (0.00, 0.04, 0.00, 0.75),
-    },
-)
-
-
-def _trot() -> SinusoidalMotion:
-    """A trot: diagonal legs (front-right with hind-left) swing together, half a cycle apart."""
-    rows = {}
-    for side, phase in (("fr", 0.0), ("hl", 0.0), ("fl", 0.5), ("hr", 0.5)):
-        rows[f"hip_{side}_pitch"] = (0.10, 0.30, 0.00, phase)
-        rows[f"knee_{side}"] = (-0.20, -0.30, 0.00, phase + 0.25)
-        rows[f"ankle_{side}_pitch"] = (0.10, 0.10, 0.00, phase - 0.10)
-    return _gait(_joint_names(QUADRUPED), 0.6, rows)
-
-
-QUADRUPED_GAIT = _trot()
-
-# Carangiform swimming: a wave travels head to tail along the spine (yaw), its amplitude
-# growing toward the tail ([WL19] §5.3: sinusoidal keyframes).
-FISH_GAIT = _gait(
-    _joint_names(FISH),
-    1.0,
-    {f"spine{i}_a": (0.0, 0.08 + 0.06 * i, 0.0, -0.15 * i) for i in range(1, 6)},
-)
-
-# Manta: the wings flap (roll, mirrored left and right) with a lag toward the tips and twist
-# (pitch) a quarter cycle ahead, which turns the flap into thrust.
-MANTA_GAIT = _gait(
-    _joint_names(MANTA),
-    1.5,
-    {
-        f"wing{i}_{side}_{dof}": (0.0, sign * amp, 0.0, lag - 0.1 * i)
-        for i in range(3)
-        for side, sign in (("l", 1.0), ("r", -1.0))
-        for dof, amp, lag in (("a", 0.35, 0.0), ("b", 0.15 * sign, 0.25))
-    },
-)
-
-REFERENCE_MOTIONS: dict[str, SinusoidalMotion] = {
-    "walker": WALKER_GAIT,
-    "hopper": HOPPER_GAIT,
-    "biped_lower": BIPED_LOWER_GAIT,
-    "quadruped": QUADRUPED_GAIT,
-    "fish": FISH_GAIT,
-    "manta": MANTA_GAIT,
-}
+    cols = np.array([rows.get(j, (0.0, 0.0, 0.0, 0.0)) for j in joints], dtype=np.float64).T
+    return SinusoidalMotion(tuple(joints), period, *cols)
 
 
 # --- planar jump clip ([L21] Jump at laptop scale) --------------------------------------------
@@ -183,10 +98,6 @@ def planar_jump_clip(
 
     Angles interpolate with monotone cubics between the keyframes; the root height keeps the
     flat feet on the ground in stance and follows the parabola of gravity in flight."""
-    from scipy.interpolate import PchipInterpolator
-
-    from paramimic.motion.clip import Clip
-
     t = np.arange(0.0, JUMP_KEYS[-1, 0] + 1e-9, 1.0 / JUMP_FPS)
     angles = PchipInterpolator(JUMP_KEYS[:, 0], JUMP_KEYS[:, 1:], axis=0)(t)
     pitch, hip, knee, ankle = angles.T

@@ -6,6 +6,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from paramimic.rl.numpy_mlp import Layers, numpy_forward
+
 
 class RunningMeanStd:
     """Mean and variance of a stream of vectors (Chan et al.'s parallel update)."""
@@ -153,20 +155,10 @@ class NumpyPolicy:
         return numpy_forward(self.v, self._normalize(obs))[:, 0]
 
 
-def numpy_layers(seq: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
+def numpy_layers(seq: nn.Sequential) -> Layers:
     """The (W [in, out], b [out]) pairs of an mlp() as numpy arrays."""
     return [
         (m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy())
         for m in seq
         if isinstance(m, nn.Linear)
     ]
-
-
-def numpy_forward(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
-    """mlp() forward in numpy: x [n, in] -> [n, out]."""
-    last = len(layers) - 1
-    for i, (w, b) in enumerate(layers):
-        x = x @ w + b
-        if i < last:
-            np.maximum(x, 0.0, out=x)  # ReLU
-    return x

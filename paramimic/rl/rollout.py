@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from paramimic.config import ActorsConfig
 from paramimic.envs import ParamEnv
 from paramimic.rl.networks import ActorCritic, NumpyPolicy
 
@@ -44,6 +45,13 @@ class TaskQueue:
 def tasks_per_fragment(num_envs: int, num_steps: int) -> int:
     """Tasks to hand a worker for one fragment: its envs' next episodes, one per 10 steps each."""
     return num_envs * (1 + num_steps // 10)
+
+
+def steps_per_fragment(actors: ActorsConfig, num_steps: int, num_workers: int) -> int:
+    """Steps per env of one worker's fragment: `actors.steps_per_fragment`, or the batch T =
+    `num_steps` split over the workers' envs (rounded up)."""
+    envs = max(1, num_workers) * actors.num_envs
+    return actors.steps_per_fragment or max(1, -(-num_steps // envs))
 
 
 @dataclass
@@ -186,100 +194,122 @@ class RolloutWorker:
             self.task_source = TaskQueue(tasks)
         if self._obs is None:
             self._reset_all()
-        m, envs = len(self.envs), self.envs
-        obs_dim = self._obs.shape[1]
-        act_dim = self.policy.act_dim
-        T = num_steps
-        obs_buf = np.empty((T, m, obs_dim), np.float32)
-        act_buf = np.empty((T, m, act_dim), np.float32)
-        logp_buf = np.empty((T, m), np.float32)
-        val_buf = np.empty((T, m), np.float32)
-        rew = np.empty((T, m), np.float32)
-        spike = np.zeros((T, m), np.float32)
-        dphi = np.ones((T, m), np.float32)
-        term = np.zeros((T, m), bool)
-        trunc = np.zeros((T, m), bool)
-        task_index = np.empty((T, m), np.int32)
-        # tasks in force: rows are added as episodes start
-        tasks: list[np.ndarray] = [self._ep[i]["task"] for i in range(m)]
-        current = np.arange(m)
-        final_obs: list[tuple[int, int, np.ndarray]] = []
-        episodes: list[EpisodeSummary] = []
+        buf = _Buffers(num_steps, len(self.envs), self._obs.shape[1], self.policy.act_dim)
+        run = _Run(tasks=[ep["task"] for ep in self._ep], current=np.arange(len(self.envs)))
         obs = self._obs
-        zero_actions = np.zeros((m, act_dim), np.float32)
-        zero_m = np.zeros(m, np.float32)
-        for t in range(T):
-            if use_policy:
-                noise = self.rng.standard_normal((m, act_dim))
-                actions, logp, values = self.fast_policy.act(obs, noise)
-            else:
-                actions, logp, values = zero_actions, zero_m, zero_m
-            obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs, actions, logp, values
-            task_index[t] = current
-            results = [env.step(a) for env, a in zip(envs, actions, strict=True)]
-            ended = []
-            for i, (_, r, te, tr, info) in enumerate(results):
-                ep = self._ep[i]
-                ep["ret"] += r
-                ep["len"] += 1
-                terms = ep["terms"]
-                for k, v in info["reward_terms"].items():
-                    terms[k] = terms.get(k, 0.0) + v
-                if te or tr:
-                    if tr:
-                        final_obs.append((t, i, results[i][0]))
-                    episodes.append(
-                        EpisodeSummary(
-                            ep["id"],
-                            np.asarray(ep["task"]),
-                            ep["ret"],
-                            ep["len"],
-                            bool(info["fell"]),
-                            bool(info["diverged"]),
-                            terms,
-                            _skill_fields(info, ep["tags"]),
-                        )
-                    )
-                    ended.append(i)
-            obs_list, r_list, te_list, tr_list, infos = zip(*results, strict=True)
-            spikes = [info["reward_spike"] for info in infos]
-            spike[t] = spikes
-            rew[t] = np.subtract(r_list, spikes)  # continuous part of the reward
-            dphi[t] = [info["dphi"] for info in infos]
-            term[t] = te_list
-            trunc[t] = tr_list
-            next_obs = np.stack(obs_list)
-            if ended:
-                starts = self._tasks(len(ended))
-                for j, i in enumerate(ended):
-                    next_obs[i] = self._start(i, None if starts is None else starts[j])
-                    tasks.append(self._ep[i]["task"])
-                    current[i] = len(tasks) - 1
-            obs = next_obs
+        for t in range(num_steps):
+            actions, logp, values = self._act(obs, use_policy)
+            buf.record_act(t, obs, actions, logp, values, run.current)
+            results = [env.step(a) for env, a in zip(self.envs, actions, strict=True)]
+            buf.record_step(t, results)
+            obs = self._finish_episodes(t, results, run)
         self._obs = obs
-        next_values = np.empty_like(val_buf)
-        next_values[:-1] = val_buf[1:]
-        next_values[-1] = self.fast_policy.value(obs)
+        return Fragment(
+            **vars(buf),  # obs, actions, ..., task_index: the [T, M] arrays
+            next_values=self._next_values(buf.values, obs, run.final_obs),
+            tasks=np.stack(run.tasks),
+            episodes=run.episodes,
+            policy_version=self.policy_version,
+        )
+
+    def _act(self, obs: np.ndarray, use_policy: bool) -> tuple[np.ndarray, ...]:
+        if not use_policy:
+            m = len(obs)
+            zeros = np.zeros(m, np.float32)
+            return np.zeros((m, self.policy.act_dim), np.float32), zeros, zeros
+        noise = self.rng.standard_normal((len(obs), self.policy.act_dim))
+        return self.fast_policy.act(obs, noise)
+
+    def _finish_episodes(self, t: int, results: list[tuple], run: _Run) -> np.ndarray:
+        """Account each env's step to its episode; summarize the episodes that ended and start
+        new ones in their envs. Returns the observations the policy sees next [M, obs_dim]."""
+        ended = []
+        for i, (obs, r, terminated, truncated, info) in enumerate(results):
+            ep = self._ep[i]
+            ep["ret"] += r
+            ep["len"] += 1
+            terms = ep["terms"]
+            for k, v in info["reward_terms"].items():
+                terms[k] = terms.get(k, 0.0) + v
+            if terminated or truncated:
+                if truncated:
+                    run.final_obs.append((t, i, obs))  # bootstrapped from V(final obs)
+                run.episodes.append(_summary(ep, info))
+                ended.append(i)
+        next_obs = np.stack([res[0] for res in results])
+        if ended:
+            starts = self._tasks(len(ended))
+            for j, i in enumerate(ended):
+                next_obs[i] = self._start(i, None if starts is None else starts[j])
+                run.tasks.append(self._ep[i]["task"])
+                run.current[i] = len(run.tasks) - 1
+        return next_obs
+
+    def _next_values(
+        self, values: np.ndarray, last_obs: np.ndarray, final_obs: list[tuple[int, int, np.ndarray]]
+    ) -> np.ndarray:
+        """V of each step's true next state [T, M]: the next step's value, V(last obs) after
+        the fragment, and V(final obs) where an episode was truncated."""
+        next_values = np.empty_like(values)
+        next_values[:-1] = values[1:]
+        next_values[-1] = self.fast_policy.value(last_obs)
         if final_obs:
             vals = self.fast_policy.value(np.stack([o for _, _, o in final_obs]))
             for (t, i, _), v in zip(final_obs, vals, strict=True):
                 next_values[t, i] = v
-        return Fragment(
-            obs_buf,
-            act_buf,
-            logp_buf,
-            val_buf,
-            next_values,
-            rew,
-            spike,
-            dphi,
-            term,
-            trunc,
-            task_index,
-            np.stack(tasks),
-            episodes,
-            self.policy_version,
-        )
+        return next_values
+
+
+@dataclass
+class _Run:
+    """What a fragment accumulates besides its arrays."""
+
+    tasks: list[np.ndarray]  # tasks in force: rows are added as episodes start
+    current: np.ndarray  # [M] row of `tasks` of each env's episode
+    final_obs: list[tuple[int, int, np.ndarray]] = field(default_factory=list)
+    episodes: list[EpisodeSummary] = field(default_factory=list)
+
+
+class _Buffers:
+    """The [T, M, ...] arrays of a fragment, filled step by step (named as Fragment's)."""
+
+    def __init__(self, T: int, m: int, obs_dim: int, act_dim: int) -> None:
+        self.obs = np.empty((T, m, obs_dim), np.float32)
+        self.actions = np.empty((T, m, act_dim), np.float32)
+        self.logp = np.empty((T, m), np.float32)
+        self.values = np.empty((T, m), np.float32)
+        self.rewards = np.empty((T, m), np.float32)
+        self.spike_rewards = np.zeros((T, m), np.float32)
+        self.dphi = np.ones((T, m), np.float32)
+        self.terminated = np.zeros((T, m), bool)
+        self.truncated = np.zeros((T, m), bool)
+        self.task_index = np.empty((T, m), np.int32)
+
+    def record_act(self, t, obs, actions, logp, values, current) -> None:
+        self.obs[t], self.actions[t], self.logp[t], self.values[t] = obs, actions, logp, values
+        self.task_index[t] = current
+
+    def record_step(self, t: int, results: list[tuple]) -> None:
+        _, r, terminated, truncated, infos = zip(*results, strict=True)
+        spikes = [info["reward_spike"] for info in infos]
+        self.spike_rewards[t] = spikes
+        self.rewards[t] = np.subtract(r, spikes)  # continuous part of the reward
+        self.dphi[t] = [info["dphi"] for info in infos]
+        self.terminated[t] = terminated
+        self.truncated[t] = truncated
+
+
+def _summary(ep: dict, info: dict) -> EpisodeSummary:
+    return EpisodeSummary(
+        episode_id=ep["id"],
+        task=np.asarray(ep["task"]),
+        ret=ep["ret"],
+        length=ep["len"],
+        fell=bool(info["fell"]),
+        diverged=bool(info["diverged"]),
+        reward_terms=ep["terms"],
+        skill=_skill_fields(info, ep["tags"]),
+    )
 
 
 def _skill_fields(info: dict, tags: dict) -> dict:

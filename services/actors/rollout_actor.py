@@ -84,3 +84,17 @@ class RolloutActor:
         if self.sampler is not None:  # acknowledged before the learner sees the fragment
             ray.get(self.sampler.ingest.remote([e.to_dict() for e in fragment.episodes]))
         return fragment
+
+
+def spawner(cfg: ExperimentConfig, obs_dim: int, act_dim: int, sampler: str):
+    """actor id i -> a started rollout actor (spread over the nodes) whose tasks come from the
+    named sampler actor; its seed follows from the run's seed and i."""
+    config = cfg.model_dump(mode="json")
+
+    def spawn(i: int) -> ray.actor.ActorHandle:
+        seed = cfg.train.seed + 1 + i
+        return RolloutActor.options(scheduling_strategy="SPREAD").remote(
+            config, obs_dim, act_dim, seed, i, sampler
+        )
+
+    return spawn

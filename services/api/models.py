@@ -24,6 +24,20 @@ class RunSummary(BaseModel):
     total_steps: int | None = None
 
 
+class CharacterInfo(BaseModel):
+    """A run's character as the registry describes it."""
+
+    run_id: str
+    name: str
+    planar: bool = Field(description="root slides in x, z and pitches (else a free root)")
+    swims: bool = Field(description="moves in MuJoCo's fluid model")
+    shape_params: dict[str, list[float]] = Field(description="b: name -> [low, high]")
+    joints: list[str] = Field(description="actuated joints, in action order")
+    gait: bool = Field(description="has a [WL19] reference gait")
+    clips: list[str] = Field(description="[L21] clips it can imitate")
+    envs: list[str] = Field(description="its gymnasium env ids")
+
+
 class Progress(BaseModel):
     run_id: str
     status: str
@@ -91,13 +105,20 @@ class Curriculum(BaseModel):
     updated_at: float | None = None
 
 
-class MarginalValueGrid(BaseModel):
+class Grid(BaseModel):
+    """Values over the run's two display dimensions: values[i][j] at (xs[j], ys[i])."""
+
     run_id: str
-    available: bool = Field(description="false until the learner has sent its first V̄")
+    available: bool = Field(description="false until there is a snapshot")
     dims: list[str] = []
     xs: list[float] = []
     ys: list[float] = []
-    values: list[list[float]] = Field([], description="V̄ at (xs[j], ys[i]) in values[i][j]")
+    values: list[list[float]] = []
+
+
+class MarginalValueGrid(Grid):
+    """V̄ over the grid; available once the learner has sent its first V̄."""
+
     mu: float | None = None
     iteration: int | None = None
 
@@ -125,13 +146,9 @@ class Elites(BaseModel):
     items: list[Elite]
 
 
-class DensityGrid(BaseModel):
-    run_id: str
-    available: bool = Field(description="false until the sampler has written a snapshot")
-    dims: list[str] = []
-    xs: list[float] = []
-    ys: list[float] = []
-    values: list[list[float]] = Field([], description="Eq. 15 at (xs[j], ys[i]) in values[i][j]")
+class DensityGrid(Grid):
+    """The KDE density of the elites (Eq. 15) over the grid."""
+
     visited: float | None = Field(None, description="D: A_h where density >= D")
     surrounding: float | None = Field(None, description="D': A_s where D' <= density < D")
     elites: int | None = None

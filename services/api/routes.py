@@ -12,8 +12,11 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, sta
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from redis.asyncio import Redis
 
+from paramimic.curriculum.elite_set import EliteSet
+from paramimic.task_space import TaskSpace
 from services.api.models import (
     Accepted,
+    CharacterInfo,
     Curriculum,
     DensityGrid,
     Elite,
@@ -123,6 +126,16 @@ async def list_runs(r: RedisDep):
             )
         )
     return runs
+
+
+@router.get("/runs/{run}/character", response_model=CharacterInfo, tags=["runs"])
+async def character(run: RunId, r: RedisDep):
+    """The run's character from the registry: capabilities, shape parameters, motions."""
+    keys, _ = await run_status(r, run)
+    info = await r.hget(keys.meta, "character_info")
+    if info is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run!r} recorded no character info")
+    return CharacterInfo(run_id=run, **json.loads(info))
 
 
 @router.get("/runs/{run}/progress", response_model=Progress, tags=["runs"])
@@ -235,36 +248,27 @@ async def elites(
     """The elite set ([L21] §5.2): all, those within the box [low, high], or the k nearest to
     a point (distance on the task box normalized per dimension), with their fitness."""
     _, summary, table = await _skill_state(r, run, "elites")
-    names = list(summary["task_ranges"])
-    table = table or {"params": [], "fitness": [], "keys": []}
-    params = np.asarray(table["params"], np.float64).reshape(-1, len(names))
-    fitness = np.asarray(table["fitness"], np.float64)
-    lo_hi = np.array(list(summary["task_ranges"].values()), np.float64).reshape(-1, 2)
-    width = lo_hi[:, 1] - lo_hi[:, 0]
-    point = _floats("near", near, len(names))
-    box_low, box_high = _floats("low", low, len(names)), _floats("high", high, len(names))
-    rows = np.arange(len(params))
-    if box_low is not None or box_high is not None:
-        lo = box_low if box_low is not None else np.full(len(names), -np.inf)
-        hi = box_high if box_high is not None else np.full(len(names), np.inf)
-        rows = rows[np.all((params >= lo) & (params <= hi), axis=1)]
+    space = TaskSpace.from_ranges(summary["task_ranges"])
+    elites = EliteSet(space.dim, space.metric)  # distances on the normalized box
+    elites.from_state(table or {"params": [], "fitness": [], "keys": []})
+    point = _floats("near", near, space.dim)
+    box_low, box_high = _floats("low", low, space.dim), _floats("high", high, space.dim)
+    rows = elites.within_box(box_low, box_high)
     distance = None
     if point is not None:
-        scaled = (params[rows] - point) / np.where(width > 0, width, np.inf)
-        distance = np.sqrt((scaled**2).sum(axis=1))
-        order = np.argsort(distance, kind="stable")[:k]
-        rows, distance = rows[order], distance[order]
+        rows = elites.nearest(point, k, among=rows)
+        distance = elites.distance(rows, point)
     rows = rows[:limit]
     items = [
         Elite(
-            key=table["keys"][i],
-            params=dict(zip(names, params[i].tolist(), strict=True)),
-            fitness=float(fitness[i]),
+            key=elites.keys[i],
+            params=space.to_dict(elites.params[i]),
+            fitness=float(elites.fitness[i]),
             distance=None if distance is None else float(distance[j]),
         )
         for j, i in enumerate(rows)
     ]
-    return Elites(run_id=run, names=names, total=len(params), items=items)
+    return Elites(run_id=run, names=list(space.names), total=len(elites), items=items)
 
 
 @router.get("/runs/{run}/curriculum/density", response_model=DensityGrid, tags=["curriculum"])
@@ -311,6 +315,10 @@ async def events(
     ]
 
 
+# what every request that changes a run shares: the bearer token, 202 and the answer
+CONTROL = dict(response_model=Accepted, status_code=202, dependencies=[TokenDep], tags=["control"])
+
+
 async def _request(r: Redis, run: str, field: str, value, kind: str, message: str) -> Accepted:
     keys, state = await run_status(r, run)
     if state not in ("running", "paused"):
@@ -322,28 +330,19 @@ async def _request(r: Redis, run: str, field: str, value, kind: str, message: st
     return Accepted(run_id=run, requested={field: value})
 
 
-@router.post(
-    "/runs/{run}/pause", response_model=Accepted, status_code=202, dependencies=[TokenDep],
-    tags=["control"],
-)  # fmt: skip
+@router.post("/runs/{run}/pause", **CONTROL)
 async def pause(run: RunId, r: RedisDep):
     """Ask the learner to pause after its current iteration (needs the bearer token)."""
     return await _request(r, run, "paused", 1, "pause_requested", "pause requested via the API")
 
 
-@router.post(
-    "/runs/{run}/resume", response_model=Accepted, status_code=202, dependencies=[TokenDep],
-    tags=["control"],
-)  # fmt: skip
+@router.post("/runs/{run}/resume", **CONTROL)
 async def resume(run: RunId, r: RedisDep):
     """Ask a paused learner to go on (needs the bearer token)."""
     return await _request(r, run, "paused", 0, "resume_requested", "resume requested via the API")
 
 
-@router.put(
-    "/runs/{run}/curriculum/k", response_model=Accepted, status_code=202,
-    dependencies=[TokenDep], tags=["control"],
-)  # fmt: skip
+@router.put("/runs/{run}/curriculum/k", **CONTROL)
 async def set_k(run: RunId, body: SetK, r: RedisDep):
     """Set the uniformity k of the adaptive sampling from the next iteration (needs the token)."""
     message = f"k = {body.k:g} requested via the API"

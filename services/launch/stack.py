@@ -12,6 +12,8 @@ from pathlib import Path
 import ray
 
 from paramimic.config import ExperimentConfig
+from paramimic.envs.skill_env import clip_setup
+from services.actors.rollout_actor import spawner
 from services.keys import sampler_actor_name
 from services.learner.ray_backend import RayBackend, SamplerClient
 from services.learner.trainer import Trainer
@@ -31,10 +33,12 @@ def ray_stack(
     cfg: ExperimentConfig, run_dir: Path, redis_url: str, run_id: str
 ) -> Iterator[RayStack]:
     """Start the sampler and the rollout actors; kill them on exit."""
-    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id)
+    clip = None if cfg.env.clip is None else clip_setup(cfg)
+    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id, clip)
     try:
         trainer = Trainer(cfg, run_dir, SamplerClient(sampler))
-        backend = RayBackend(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
+        spawn = spawner(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
+        backend = RayBackend(cfg, spawn)
         try:
             yield RayStack(trainer, backend, sampler, run_id)
         finally:

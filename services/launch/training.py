@@ -111,18 +111,31 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
     )
     stop = StopFlag(console)
     handlers = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    run = Run(cfg, run_dir, state, stop, console)
     try:
         with ExitStack() as services:
             if opts.serial:
-                return _train_serial(cfg, run_dir, state, stop, console)
-            return _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, services)
+                return _train_serial(run)
+            return _train_distributed(run, opts, api_port, services)
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
         console.print(f"checkpoint: {run_dir / 'checkpoints' / checkpoint.LATEST}")
 
 
-def _train_serial(cfg, run_dir, state, stop, console) -> int:
+@dataclass
+class Run:
+    """What one training run carries from the launcher into its loop."""
+
+    cfg: ExperimentConfig
+    run_dir: Path
+    state: dict | None  # the checkpoint it resumes from
+    stop: StopFlag
+    console: Console
+
+
+def _train_serial(run: Run) -> int:
+    cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
     trainer = Trainer(cfg, run_dir)
     if state is not None:
         trainer.load_state_dict(state)
@@ -133,7 +146,7 @@ def _train_serial(cfg, run_dir, state, stop, console) -> int:
     return 0
 
 
-def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, services) -> int:
+def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: ExitStack) -> int:
     import ray
 
     from services.launch.api_process import ApiProcess
@@ -143,6 +156,7 @@ def _train_distributed(cfg, run_dir, state, opts, api_port, stop, console, servi
     from services.learner.ray_backend import AllActorsLost
     from services.learner.reporter import RunReporter
 
+    cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
     redis_url = opts.redis_url
     if redis_url is None:
         server = EmbeddedRedis(run_dir / "redis")

@@ -8,6 +8,7 @@ import math
 import time
 from pathlib import Path
 
+from paramimic.characters import registration
 from paramimic.config import ExperimentConfig
 from services.keys import HISTORY_LIMIT, RUNS, RunKeys
 from services.store import add_event, connect
@@ -47,6 +48,7 @@ class RunReporter:
         meta = {
             "name": cfg.name,
             "character": cfg.character,
+            "character_info": json.dumps(registration(cfg.character).info()),
             "config": json.dumps(cfg.model_dump(mode="json")),
             "status": "running",
             "run_dir": str(run_dir.resolve()),

@@ -8,7 +8,6 @@
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,14 +18,21 @@ import numpy as np
 import torch
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum import MarginalValue, TaskSpace
 from paramimic.curriculum.bootstrap import Bootstrap
-from paramimic.curriculum.marginal_value import Layers
+from paramimic.curriculum.marginal_value import MarginalValue
 from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
+from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.ppo import PPOLearner
-from paramimic.rl.rollout import EpisodeSummary, Fragment, RolloutWorker, tasks_per_fragment
+from paramimic.rl.rollout import (
+    EpisodeSummary,
+    Fragment,
+    RolloutWorker,
+    steps_per_fragment,
+    tasks_per_fragment,
+)
+from paramimic.task_space import TaskSpace
 from services.learner import checkpoint
 
 
@@ -75,7 +81,7 @@ class SerialBackend:
         curriculum: Curriculum,
     ) -> None:
         m = cfg.actors.num_envs
-        self.steps = cfg.actors.steps_per_fragment or math.ceil(cfg.ppo.num_steps / m)
+        self.steps = steps_per_fragment(cfg.actors, cfg.ppo.num_steps, num_workers=1)
         self.n_tasks = tasks_per_fragment(m, self.steps)
         self.curriculum = curriculum
         self.worker = RolloutWorker(
@@ -139,7 +145,8 @@ class Trainer:
                 self.space, probe.trace_shape, sc.p_hidden, sc.p_lr, sc.p_batch, seed=seed + 4
             )
             self.bootstrap = Bootstrap(sc)
-        self.curriculum = curriculum or new_curriculum(cfg)
+        self.clip = probe.clip_setup() if self.skill else None  # what the curriculum needs
+        self.curriculum = curriculum or new_curriculum(cfg, self.clip)
         self.progress = Progress()
 
     # --- state --------------------------------------------------------------------------------

@@ -14,20 +14,21 @@ from services.sampler.service import SamplerService
 
 @ray.remote(num_cpus=0, max_restarts=-1, max_task_retries=-1)
 class SamplerActor(SamplerService):
-    def __init__(self, config: dict, redis_url: str, run_id: str) -> None:
+    def __init__(self, config: dict, redis_url: str, run_id: str, clip: dict | None) -> None:
         restarted = ray.get_runtime_context().was_current_actor_reconstructed
-        super().__init__(config, redis_url, run_id, restarted)
+        super().__init__(config, redis_url, run_id, restarted, clip=clip)
 
     def pid(self) -> int:
         return os.getpid()
 
 
-def start_sampler(config: dict, redis_url: str, run_id: str):
+def start_sampler(config: dict, redis_url: str, run_id: str, clip: dict | None = None):
     """Create the run's named sampler actor on the learner's node (it goes when the learner
-    goes; a worker node leaving must not take it) and wait until it has loaded its state."""
+    goes; a worker node leaving must not take it) and wait until it has loaded its state.
+    `clip`: what an [L21] curriculum knows of the clip (`paramimic.envs.skill_env.clip_setup`)."""
     here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
     handle = SamplerActor.options(
         name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE, scheduling_strategy=here
-    ).remote(config, redis_url, run_id)
+    ).remote(config, redis_url, run_id, clip)
     ray.get(handle.pid.remote())
     return handle

@@ -40,8 +40,10 @@ class SamplerService:
         run_id: str,
         restarted: bool = False,
         retry_seconds: float = 120.0,
+        clip: dict | None = None,
     ) -> None:
-        self.curriculum = new_curriculum(ExperimentConfig.model_validate(config))
+        # `clip`: the [L21] clip's trace shape and a0 (`paramimic.envs.skill_env.clip_setup`)
+        self.curriculum = new_curriculum(ExperimentConfig.model_validate(config), clip)
         self.parts = self.curriculum.STATE_PARTS
         self.skill = TRACES in self.parts  # the [L21] curriculum
         self.keys = RunKeys(run_id)

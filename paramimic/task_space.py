@@ -40,6 +40,27 @@ class TaskSpace:
     def center(self) -> np.ndarray:
         return 0.5 * (self.low + self.high)
 
+    @property
+    def free(self) -> np.ndarray:
+        """[d] bool: dimensions with a non-zero range (the others are constraints)."""
+        return self.width > 0
+
+    @property
+    def metric(self) -> np.ndarray:
+        """diag A [d] of the distance (a − a')ᵀA(a − a') on the normalized box: 1/width² on free
+        dimensions, 0 on fixed ones ([L21] Eq. 13 with A = I on normalized parameters)."""
+        return np.where(self.free, 1.0 / np.where(self.free, self.width, 1.0) ** 2, 0.0)
+
+    def normalize(self, a: np.ndarray) -> np.ndarray:
+        """a mapped to the unit box: [0, 1] per free dimension, 0.5 on fixed ones: [n, d]."""
+        a = np.atleast_2d(np.asarray(a, dtype=np.float64))
+        x = (a - self.low) / np.where(self.free, self.width, 1.0)
+        return np.where(self.free, x, 0.5)
+
+    def scaled(self, a: np.ndarray) -> np.ndarray:
+        """a mapped to [-1, 1] per free dimension, 0 on fixed ones (network inputs): [n, d]."""
+        return 2.0 * self.normalize(a) - 1.0
+
     def ranges(self) -> dict[str, tuple[float, float]]:
         return {
             n: (float(lo), float(hi))

@@ -1,0 +1,159 @@
+"""The character registry: every character registers once, and everything else reads it.
+
+A `Registration` holds a character (anything that satisfies the `Character` protocol: a builder
+of F(B̄, b) with its shape parameters and capabilities), the [WL19] procedural gait it walks or
+swims with (for `ParamEnv`), and the [L21] clips it can imitate (for `SkillEnv`). Config
+validation, both environments, the gymnasium registrations (`paramimic.envs`) and the API's
+character info all look characters up here. Adding a character is one file that defines it and
+one `register(...)` line (`paramimic/characters/__init__.py`, or `paramimic.envs.register` at
+run time, which also makes its gymnasium envs).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from paramimic.characters.body import Body, Joint, ShapeParam
+from paramimic.motion.clip import Clip, ClipPose
+from paramimic.motion.procedural import SinusoidalMotion
+
+
+@runtime_checkable
+class Character(Protocol):
+    """A base character B̄ and its shape map F(B̄, b) ([WL19] §3.1)."""
+
+    name: str
+    shape_params: tuple[ShapeParam, ...]  # b, each with the range it is meant for
+    end_effectors: tuple[str, ...]  # bodies with a site `{name}_end`
+    feet: tuple[str, ...]  # contact sites `{foot}_c0..3` ([WL19] Eq. 1 points)
+
+    @property
+    def joints(self) -> tuple[Joint, ...]: ...  # actuated hinges, in actuator order
+
+    @property
+    def root(self) -> str: ...
+
+    @property
+    def fall_bodies(self) -> tuple[str, ...]: ...  # their contact with the ground is a fall
+
+    @property
+    def planar(self) -> bool: ...  # root slides in x, z and pitches; else a free root
+
+    @property
+    def swims(self) -> bool: ...  # moves in MuJoCo's fluid model, no floor and no falls
+
+    def param_names(self) -> tuple[str, ...]: ...
+
+    def default_shape(self) -> dict[str, float]: ...
+
+    def compile(self, shape: dict[str, float] | None = None) -> Body: ...
+
+
+class PosesClips(Protocol):
+    """A character that can imitate clips maps a clip's poses to its qpos."""
+
+    def pose_qpos(self, body: Body, pose: ClipPose) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Registration:
+    """One character and the motions it supports."""
+
+    character: Character
+    gait: SinusoidalMotion | None = None  # [WL19] §5.3 reference gait (ParamEnv)
+    clips: Mapping[str, Callable[[], Clip]] = field(default_factory=dict)  # [L21] (SkillEnv)
+    # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "env_config"); every
+    # character also gets `paramimic/<Name>-v0` and one env per clip
+    envs: Mapping[str, Mapping] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.character.name
+
+    @property
+    def title(self) -> str:
+        """The CamelCase name of gymnasium ids: biped_lower -> BipedLower."""
+        return camel(self.name)
+
+    def info(self) -> dict:
+        """What a reader of the run (the API, a dashboard) knows of the character: JSON."""
+        c = self.character
+        return {
+            "name": c.name,
+            "planar": c.planar,
+            "swims": c.swims,
+            "shape_params": {p.name: [p.low, p.high] for p in c.shape_params},
+            "joints": [j.name for j in c.joints],
+            "gait": self.gait is not None,
+            "clips": sorted(self.clips),
+            "envs": sorted(self.env_specs()),
+        }
+
+    def env_specs(self) -> dict[str, dict]:
+        """Gymnasium env id -> kwargs of `paramimic.envs.make_env` for this character: the
+        base env (its gait, or else its first clip), one env per clip, and the extra ones."""
+        specs: dict[str, dict] = {}
+        if self.gait is not None:
+            specs[f"paramimic/{self.title}-v0"] = {"character": self.name}
+        for i, clip in enumerate(self.clips):
+            stem = camel(clip)
+            stem = stem if stem.startswith(self.title) else self.title + stem
+            kwargs = {"character": self.name, "env_config": {"clip": clip}}
+            specs[f"paramimic/{stem}-v0"] = kwargs
+            if i == 0 and self.gait is None:
+                specs[f"paramimic/{self.title}-v0"] = kwargs
+        for stem, kwargs in self.envs.items():
+            specs[f"paramimic/{stem}-v0"] = {"character": self.name, **kwargs}
+        return specs
+
+
+def camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.split("_"))
+
+
+_REGISTRY: dict[str, Registration] = {}
+REGISTRY: Mapping[str, Registration] = MappingProxyType(_REGISTRY)  # read-only view
+
+
+def register(registration: Registration) -> Registration:
+    """Add a character. Its gait must drive its joints in order; a name is registered once
+    (registering the same registration again is a no-op)."""
+    c = registration.character
+    if not isinstance(c, Character):
+        raise TypeError(f"{c!r} does not satisfy the Character protocol")
+    known = _REGISTRY.get(c.name)
+    if known is not None and known is not registration:
+        raise ValueError(f"character {c.name!r} is already registered")
+    joints = tuple(j.name for j in c.joints)
+    gait = registration.gait
+    if gait is not None and gait.joints != joints:
+        raise ValueError(f"{c.name}: gait joints {gait.joints} != the character's {joints}")
+    if registration.clips and not hasattr(c, "pose_qpos"):
+        raise TypeError(f"{c.name}: a character with clips needs pose_qpos (PosesClips)")
+    _REGISTRY[c.name] = registration
+    return registration
+
+
+def registration(name: str) -> Registration:
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise KeyError(f"unknown character {name!r}; known: {sorted(_REGISTRY)}") from None
+
+
+def get_character(name: str) -> Character:
+    return registration(name).character
+
+
+def clip_owners() -> dict[str, tuple[str, ...]]:
+    """Every registered clip name -> the characters that can imitate it."""
+    owners: dict[str, list[str]] = {}
+    for reg in _REGISTRY.values():
+        for clip in reg.clips:
+            owners.setdefault(clip, []).append(reg.name)
+    return {k: tuple(v) for k, v in owners.items()}

@@ -1,0 +1,216 @@
+"""The env core that ParamEnv ([WL19]) and SkillEnv ([L21]) share.
+
+A family env draws task parameters a from its task space at every reset (or takes
+`options={"task": a}`), builds the body F(B̄, b) for the shape part of a (compiled bodies are
+cached per shape), places it on the ground, ends an episode when the simulation diverges, and can
+change the body mid-episode ([WL19] §5.2). The subclasses add their reference motion,
+observation, reward and termination.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import lru_cache
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from paramimic.characters import Body, registration
+from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
+from paramimic.config import EnvConfig
+from paramimic.task_space import TaskSpace
+
+# MuJoCo's warnings for a bad qpos, qvel or qacc (it resets the state when one fires)
+INSTABILITY = slice(
+    int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQACC) + 1
+)
+MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
+
+
+@lru_cache(maxsize=32)
+def compiled_body(character: str, shape: tuple[tuple[str, float], ...]) -> Body:
+    """F(B̄, b) compiled, cached per (character, shape): shared, never modified by the envs."""
+    return registration(character).character.compile(dict(shape))
+
+
+class EnvCore(gym.Env):
+    metadata = {"render_modes": [], "render_fps": 30}
+    GOALS: frozenset[str] = frozenset()  # task parameters besides the shape this env reads
+
+    def __init__(
+        self,
+        character: str = "walker",
+        task: Mapping[str, tuple[float, float]] | None = None,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+    ) -> None:
+        """A registered character's family over the task space `task` (name -> [min, max]),
+        with the env section of an experiment's config."""
+        self.registration = registration(character)
+        self.definition = self.registration.character
+        self.config = (
+            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
+        )
+        task = dict(task or {})
+        shape_names = self.definition.param_names()
+        unknown = set(task) - set(shape_names) - self.GOALS
+        if unknown:
+            raise ValueError(
+                f"unknown task parameters {sorted(unknown)} for {character!r} in "
+                f"{type(self).__name__}; allowed: {sorted(set(shape_names) | self.GOALS)}"
+            )
+        self.task_space = TaskSpace.from_ranges(task)
+        names = self.task_space.names
+        self._shape_idx = [(n, i) for i, n in enumerate(names) if n in shape_names]
+        self._task = self.task_space.center.copy()
+        self.frame_skip = self.config.frame_skip
+        self._base = compiled_body(self.definition.name, ())
+        self._base_data = mujoco.MjData(self._base.model)
+        self.character: Body | None = None
+        self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
+        self._setup()
+
+    def _setup(self) -> None:
+        """The subclass's own set-up: reference motion, spaces, reward weights."""
+        raise NotImplementedError
+
+    def goal_index(self, name: str) -> int | None:
+        """The task dimension of a goal or condition, None when the task space has none."""
+        names = self.task_space.names
+        return names.index(name) if name in names else None
+
+    # --- task and body --------------------------------------------------------------------------
+
+    def task_from_options(self, options: Mapping[str, Any] | None) -> np.ndarray:
+        """The task of a reset: `options["task"]` (a mapping or an array, checked against the
+        task space) or a uniform draw from it."""
+        task = (options or {}).get("task")
+        if task is None:
+            return self.task_space.sample(self.np_random, 1)[0]
+        a = (
+            self.task_space.from_dict(task)
+            if isinstance(task, Mapping)
+            else np.asarray(task, dtype=np.float64).reshape(-1)
+        )
+        if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
+            raise ValueError(f"task {a} is not inside the task space {self.task_space.ranges()}")
+        return a
+
+    def body_for(self, task: np.ndarray) -> Body:
+        """The compiled body of the shape part of `task`."""
+        shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
+        return compiled_body(self.definition.name, shape)
+
+    def _load(self, task: np.ndarray) -> bool:
+        """Make the body of `task` current (its model and data); False if it already was."""
+        body = self.body_for(task)
+        if self.character is body:
+            return False
+        self.character = body
+        self._bind(body)
+        return True
+
+    def _bind(self, body: Body) -> None:
+        """Set up model, data and what depends on the body (subclasses extend it)."""
+        self.model = body.model
+        self.data = mujoco.MjData(self.model)
+
+    # --- ground, divergence, falls ----------------------------------------------------------------
+
+    def ground_posture(self, qpos: np.ndarray) -> np.ndarray:
+        """The initial posture on the ground. A body other than the base is fitted by [WL19]
+        Eq. 1 to the base body's contact points in the same pose; the base (or a failed fit)
+        is moved vertically until its lowest foot point touches."""
+        c = self.character
+        if self.config.ground_fit and c.shape != self._base.shape:
+            base, bd = self._base, self._base_data
+            bd.qpos[:] = lift_to_ground(
+                base.model, bd, qpos, base.contact_site_ids, self._height_adr
+            )
+            mujoco.mj_kinematics(base.model, bd)
+            targets = bd.site_xpos[base.contact_site_ids]
+            joints = c.model.actuator_trnid[:, 0]
+            height_joint = 0 if not self.definition.planar else c.model.joint("rootz").id
+            return fit_ground_contact(
+                c.model, self.data, qpos, targets, c.contact_site_ids, height_joint, joints
+            ).qpos
+        return lift_to_ground(c.model, self.data, qpos, c.contact_site_ids, self._height_adr)
+
+    def _watch_stability(self) -> None:
+        """Remember the instability warnings so far: `diverging` looks for new ones."""
+        self._unstable = int(self.data.warning.number[INSTABILITY].sum())
+        self._max_qvel_sq = self.model.nv * MAX_SPEED**2
+
+    def diverging(self) -> bool:
+        """NaN or exploding velocities, or MuJoCo's own reset of the state on a bad qpos, qvel
+        or qacc: the episode ends, never the run."""
+        qvel = self.data.qvel
+        return (
+            not qvel @ qvel < self._max_qvel_sq
+            or self.data.warning.number[INSTABILITY].sum() > self._unstable
+        )
+
+    def fall_contact(self) -> bool:
+        """A fall body (root, torso, head, ...) touches the floor."""
+        d = self.data
+        for i in range(d.ncon):
+            g1, g2 = d.contact.geom1[i], d.contact.geom2[i]
+            if (g1 == self._floor and self._fall_geoms[g2]) or (
+                g2 == self._floor and self._fall_geoms[g1]
+            ):
+                return True
+        return False
+
+    def _index_fall_geoms(self) -> None:
+        m = self.model
+        fall = [m.body(b).id for b in self.definition.fall_bodies]
+        self._fall_geoms = np.isin(m.geom_bodyid, fall)
+        self._floor = m.geom("floor").id if not self.definition.swims else -1
+
+    # --- shape change on the fly ([WL19] §5.2) ----------------------------------------------------
+
+    def set_shape(self, shape: Mapping[str, float]) -> np.ndarray:
+        """Change the body mid-episode ([WL19] §5.2): rebuild the model for the new shape, copy
+        joint positions, velocities and controls, lift the body out of the ground if its limbs
+        grew, and carry on from the same state and phase. The shape parameters must be task
+        dimensions (the policy observes them). Returns the new observation."""
+        a = self._task.copy()
+        shape_dims = dict(self._shape_idx)
+        for name, value in shape.items():
+            if name not in shape_dims:
+                raise ValueError(
+                    f"{name!r} is not a shape dimension of this task space; "
+                    f"shape dimensions: {sorted(shape_dims)}"
+                )
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
+            a[shape_dims[name]] = float(value)
+        old, body_before = self.data, self.character
+        self._task = a
+        self._load(a)
+        d = self.data
+        d.qpos[:], d.qvel[:], d.ctrl[:] = old.qpos, old.qvel, old.ctrl
+        d.time = old.time
+        mujoco.mj_forward(self.model, d)
+        depth = -min((d.contact.dist[i] for i in range(d.ncon)), default=0.0)
+        if depth > 0:  # lift until no penetration
+            d.qpos[self._height_adr] += depth + 1e-4
+            mujoco.mj_forward(self.model, d)
+        self._watch_stability()
+        self._shape_changed(old, body_before)
+        obs = self._observe()
+        self._last_obs = obs
+        return obs
+
+    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
+        """What a subclass carries over to the new body after `set_shape`."""
+
+    def _observe(self) -> np.ndarray:
+        raise NotImplementedError
+
+    # --- accessors ------------------------------------------------------------------------------
+
+    @property
+    def task(self) -> np.ndarray:
+        return self._task.copy()
