@@ -56,7 +56,7 @@ def test_wl19_regularization_bell():
 def test_wl19_weights_and_reward():
     # Table 3 weights (5, 2, 2 per effector, 1, 1, 1) with two effectors sum to 14
     w = wl19_weights(5, 2, 2, 1, 1, 1, n_ee=2)
-    np.testing.assert_allclose(w * 14, [5, 2, 2, 2, 1, 1, 1])
+    np.testing.assert_allclose(np.array(w) * 14, [5, 2, 2, 1, 1, 1])  # w3 once per effector
     terms = WL19Terms(0.5, 0.25, np.array([1.0, 0.0]), 0.8, 0.6, 0.1)
     # (5·0.5 + 2·0.25 + 2·1 + 2·0 + 1·0.8 + 1·0.6 + 1·0.1) / 14 = 6.5 / 14
     assert wl19_reward(terms, w) == pytest.approx(6.5 / 14)

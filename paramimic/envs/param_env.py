@@ -28,6 +28,7 @@ from paramimic.envs.rewards import (
     wl19_regularization,
     wl19_reward,
     wl19_task,
+    wl19_task_share,
     wl19_weights,
 )
 
@@ -305,8 +306,7 @@ class ParamEnv(EnvCore):
             s[c.tau_sensor], c.torque_limit, rc.sigma_torque, self._scales.energy
         )
         terms = WL19Terms(pose, velocity, ee, com, direction, torque)
-        w, n = self._weights, self._n_ee
-        reward = wl19_reward(terms, w)
+        reward = wl19_reward(terms, self._weights)
         reported = {
             "pose": pose,
             "velocity": velocity,
@@ -314,7 +314,7 @@ class ParamEnv(EnvCore):
             "com_velocity": com,
             "direction": direction,
             "torque": torque,
-            "task": float(w[2 + n] * com + w[3 + n] * direction),  # the task share of R
+            "task": wl19_task_share(terms, self._weights),
         }
         return reward, reported
 

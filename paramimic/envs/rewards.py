@@ -10,18 +10,31 @@ by hand.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class WL19Terms:
+_XYZ = np.ones(3)  # sums the squared x, y, z of each end-effector error
+
+
+class WL19Terms(NamedTuple):
     """The bells of one control step ([WL19] Eq. 5-7); `end_effector` has one per effector."""
 
     pose: float
     velocity: float
     end_effector: np.ndarray  # [n_ee]
+    com_velocity: float
+    direction: float
+    torque: float
+
+
+class WL19Weights(NamedTuple):
+    """w1..w6 of Eq. 4 (w3 per end-effector), divided by their sum (see `wl19_weights`)."""
+
+    pose: float
+    velocity: float
+    end_effector: float
     com_velocity: float
     direction: float
     torque: float
@@ -39,9 +52,9 @@ def wl19_imitation(
     [nj] and each end-effector's position error [n_ee, 3] (root frame). Returns (pose,
     velocity, end-effectors [n_ee])."""
     nj = len(q_err)
-    pose = math.exp(-float(q_err @ q_err) / (sigma_pose * nj))
-    velocity = math.exp(-float(dq_err @ dq_err) / (sigma_velocity * nj))
-    ee = np.exp(-np.einsum("ij,ij->i", ee_err, ee_err) / (sigma_end_effector * 3))
+    pose = math.exp(-q_err.dot(q_err) / (sigma_pose * nj))
+    velocity = math.exp(-dq_err.dot(dq_err) / (sigma_velocity * nj))
+    ee = np.exp((ee_err * ee_err).dot(_XYZ) * (-1.0 / (sigma_end_effector * 3)))
     return pose, velocity, ee
 
 
@@ -68,7 +81,7 @@ def wl19_regularization(
     """[WL19] Eq. 7, R_reg: the bell of the joint torques relative to their limits [nj], the
     energy scaled by m₀/m for this body ([WL19] Table 1)."""
     x = tau / tau_limit
-    return math.exp(-energy_scale * float(x @ x) / (sigma_torque * len(x)))
+    return math.exp(-energy_scale * x.dot(x) / (sigma_torque * len(x)))
 
 
 def wl19_weights(
@@ -80,26 +93,25 @@ def wl19_weights(
     w_torque: float,
     n_ee: int,
     imitation: bool = True,
-) -> np.ndarray:
-    """The weights of Eq. 4 over [pose, velocity, each end-effector, COM velocity, direction,
-    torque] [5 + n_ee], divided by their sum so that a step's reward lies in (0, 1]. Without a
-    reference motion the imitation weights are 0."""
+) -> WL19Weights:
+    """The weights of Eq. 4 divided by their sum (w3 counted once per end-effector) so that a
+    step's reward lies in (0, 1]. Without a reference motion the imitation weights are 0."""
     k = 1.0 if imitation else 0.0
-    w = np.array(
-        [k * w_pose, k * w_velocity, *[k * w_end_effector] * n_ee, w_com_velocity, w_direction]
-        + [w_torque]
-    )
-    return w / w.sum()
+    w = (k * w_pose, k * w_velocity, k * w_end_effector, w_com_velocity, w_direction, w_torque)
+    total = w[0] + w[1] + n_ee * w[2] + w[3] + w[4] + w[5]
+    return WL19Weights(*(x / total for x in w))
 
 
-def wl19_reward(terms: WL19Terms, weights: np.ndarray) -> float:
-    """[WL19] Eq. 4: R = R_imit + R_task + R_reg as the weighted sum of the bells, with the
-    weights of `wl19_weights` [5 + n_ee]."""
-    n_ee = len(terms.end_effector)
-    imit = weights[0] * terms.pose + weights[1] * terms.velocity
-    imit += float(weights[2 : 2 + n_ee] @ terms.end_effector)
-    task = weights[2 + n_ee] * terms.com_velocity + weights[3 + n_ee] * terms.direction
-    return float(imit + task + weights[4 + n_ee] * terms.torque)
+def wl19_task_share(terms: WL19Terms, weights: WL19Weights) -> float:
+    """The R_task part of Eq. 4: w4 r_com + w5 r_direction."""
+    return weights.com_velocity * terms.com_velocity + weights.direction * terms.direction
+
+
+def wl19_reward(terms: WL19Terms, weights: WL19Weights) -> float:
+    """[WL19] Eq. 4: R = R_imit + R_task + R_reg as the weighted sum of the bells."""
+    imit = weights.pose * terms.pose + weights.velocity * terms.velocity
+    imit += weights.end_effector * float(terms.end_effector.sum())
+    return imit + wl19_task_share(terms, weights) + weights.torque * terms.torque
 
 
 def l21_tracking(
