@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-import paramimic.envs.param_env as param_env
+import paramimic.envs.core as env_core
 from paramimic.characters.ground_fit import fit_ground_contact
 from paramimic.config import load_config
 from paramimic.envs import ParamEnv
@@ -34,7 +34,7 @@ def measure(name: str, resets: int) -> dict:
         fits.append(fit)
         return fit
 
-    param_env.fit_ground_contact = recording
+    env_core.fit_ground_contact = recording
     out = {}
     try:
         for on in (True, False):
@@ -51,7 +51,7 @@ def measure(name: str, resets: int) -> dict:
                 out["fits"] = len(fits)
                 out["fallback_share"] = float(np.mean([f.method == "lift" for f in fits]))
     finally:
-        param_env.fit_ground_contact = fit_ground_contact
+        env_core.fit_ground_contact = fit_ground_contact
     return out
 
 

@@ -37,14 +37,15 @@ def test_growing_limbs_mid_episode_lifts_the_body_and_keeps_the_state(name, task
     env.reset(seed=0, options={"task": {k: v * 0.8 for k, v in center.items()}})
     rng = np.random.default_rng(0)
     _walk(env, 3, rng)
-    before = env.data
+    before, model_before = env.data, env.model
     joints = before.qpos[env.character.qpos_idx].copy()
     joint_vel = before.qvel[env.character.qvel_idx].copy()
     root_vel = before.qvel[:3].copy()
     phase, steps = env._phase, env._steps
     obs = env.set_shape(grow)
     after = env.data
-    assert after is not before and env.character.shape != {}
+    assert env.model is not model_before  # the body was rebuilt (its data carried over)
+    assert all(env.character.shape[k] == v for k, v in grow.items())
     # state continuity: joint angles and velocities, root velocity, phase, step count
     np.testing.assert_array_equal(after.qpos[env.character.qpos_idx], joints)
     np.testing.assert_array_equal(after.qvel[env.character.qvel_idx], joint_vel)

@@ -29,9 +29,9 @@ from paramimic.characters.body import (
     add_servos,
     index_character,
     joint_names,
-    shape_with_defaults,
     world_spec,
 )
+from paramimic.characters.dimensions import Dims, shape_with_defaults
 from paramimic.characters.registry import Registration
 from paramimic.motion.procedural import SinusoidalMotion, alternating, gait
 
@@ -147,60 +147,70 @@ class BodyPlan:
             return SWIM_DEPTH, legs
         return -min(sole(f) for f in self.feet), legs
 
+    def dimensions(self, shape: dict[str, float]) -> Dims:
+        """What the shape sets: every part's box (size ⊙ b_g ⊙ b_l^i) and where its joint sits
+        in the parent, the feet's contact corners, and the root height on the ground."""
+        ext, local, _ = self.layout(shape)
+        height, legs = self.rest_height(shape)
+        bodies, geoms, sites = {}, {}, {}
+        for p in self.parts:
+            bodies[p.name] = [0.0, 0.0, height] if p.parent is None else local[p.name].tolist()
+            center, half = np.array(p.offset) * ext[p.name], ext[p.name] / 2
+            geoms[p.name] = {"pos": center.tolist(), "size": half.tolist()}
+            sites[f"{p.name}_end"] = center.tolist()
+            if p.foot:
+                for i, (sx, sy) in enumerate([(-1, -1), (-1, 1), (1, -1), (1, 1)]):
+                    corner = center + half * np.array([sx, sy, -1.0])  # [WL19] Eq. 1 points
+                    sites[f"{p.name}_c{i}"] = corner.tolist()
+        lengths = {p.name: float(ext[p.name][2]) for p in self.parts}
+        return Dims(bodies, geoms, sites, legs, height, lengths)
+
     def compile(self, shape: dict[str, float] | None = None) -> Body:
         shape = shape_with_defaults(self, shape)
-        spec = self.spec(shape)
-        height, legs = self.rest_height(shape)
-        ext = self.extents(shape)
-        lengths = {p.name: float(ext[p.name][2]) for p in self.parts}
-        return index_character(self, shape, spec.compile(), legs, height, lengths)
+        dims = self.dimensions(shape)
+        model = self.spec(shape, dims).compile()
+        return index_character(self, shape, model, dims.legs, dims.hip_height, dims.lengths)
 
-    def spec(self, shape: dict[str, float]) -> mujoco.MjSpec:
-        ext, local, _ = self.layout(shape)
-        height, _ = self.rest_height(shape)
-        spec = world_spec(self.name, floor=not self.swims, light_height=height + 4)
+    def spec(
+        self, shape: dict[str, float] | None = None, dims: Dims | None = None
+    ) -> mujoco.MjSpec:
+        dims = dims or self.dimensions(shape_with_defaults(self, shape))
+        spec = world_spec(self.name, floor=not self.swims, light_height=dims.hip_height + 4)
         if self.swims:
             spec.option.gravity = [0.0, 0.0, 0.0]
             spec.option.density = WATER_DENSITY
             spec.option.viscosity = WATER_VISCOSITY
-        bodies: dict[str, mujoco.MjsBody] = {}
-        for p in self.parts:
-            if p.parent is None:
-                body = spec.worldbody.add_body(name=p.name, pos=[0, 0, height])
-                body.add_freejoint(name="root")
-            else:
-                body = bodies[p.parent].add_body(name=p.name, pos=local[p.name].tolist())
-            bodies[p.name] = body
-            for j in p.joints:
-                add_hinge(body, j)
-            self._add_geom(body, p, ext[p.name])
-        add_servos(spec, self.joints)
-        add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
-        return spec
-
-    def _add_geom(self, body: mujoco.MjsBody, part: Part, ext: np.ndarray) -> None:
-        center = np.array(part.offset) * ext
-        half = ext / 2
-        density = WATER_DENSITY if self.swims else DENSITY
-        geom = body.add_geom(
-            name=part.name,
-            type=mujoco.mjtGeom.mjGEOM_ELLIPSOID
+        kind = (
+            mujoco.mjtGeom.mjGEOM_ELLIPSOID
             if self.geom == "ellipsoid"
-            else mujoco.mjtGeom.mjGEOM_BOX,
-            pos=center.tolist(),
-            size=half.tolist(),
-            density=density,
+            else mujoco.mjtGeom.mjGEOM_BOX
+        )
+        common = dict(
+            type=kind,
+            density=WATER_DENSITY if self.swims else DENSITY,
             contype=1,
             conaffinity=0,
             rgba=[0.45, 0.6, 0.85, 1],
         )
-        if self.swims:
-            geom.fluid_ellipsoid = 1.0  # lift and drag of the ellipsoid model
-        body.add_site(name=f"{part.name}_end", pos=center.tolist())
-        if part.foot:
-            for i, (sx, sy) in enumerate([(-1, -1), (-1, 1), (1, -1), (1, 1)]):
-                corner = center + half * np.array([sx, sy, -1.0])  # [WL19] Eq. 1 points
-                body.add_site(name=f"{part.name}_c{i}", pos=corner.tolist())
+        bodies: dict[str, mujoco.MjsBody] = {}
+        for p in self.parts:
+            parent = spec.worldbody if p.parent is None else bodies[p.parent]
+            body = parent.add_body(name=p.name, pos=dims.bodies[p.name])
+            if p.parent is None:
+                body.add_freejoint(name="root")
+            bodies[p.name] = body
+            for j in p.joints:
+                add_hinge(body, j)
+            g = body.add_geom(name=p.name, **dims.geoms[p.name], **common)
+            if self.swims:
+                g.fluid_ellipsoid = 1.0  # lift and drag of the ellipsoid model
+            body.add_site(name=f"{p.name}_end", pos=dims.sites[f"{p.name}_end"])
+            if p.foot:
+                for i in range(4):
+                    body.add_site(name=f"{p.name}_c{i}", pos=dims.sites[f"{p.name}_c{i}"])
+        add_servos(spec, self.joints)
+        add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
+        return spec
 
 
 # --- the characters --------------------------------------------------------------------------

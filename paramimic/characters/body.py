@@ -17,6 +17,8 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from paramimic.characters.dimensions import Dims, shape_with_defaults
+
 DENSITY = 1000.0  # kg/m^3, constant for every shape so that mass follows volume
 TIMESTEP = 1.0 / 600.0  # [WL19] Table 2: 600 Hz simulation
 PLANAR_AXIS = (0.0, -1.0, 0.0)  # positive angle = flexion forward in the sagittal (x-z) plane
@@ -115,11 +117,17 @@ class CharacterDef:
             qpos[:, model.jnt_qposadr[model.joint(name).id]] = pose.revolute[:, r]
         return qpos
 
+    def dimensions(self, shape: dict[str, float]) -> Dims:
+        return planar_dimensions(self, shape)
+
+    def spec(self, shape: dict[str, float] | None = None) -> mujoco.MjSpec:
+        return build_spec(self, shape)
+
     def compile(self, shape: dict[str, float] | None = None) -> Body:
-        built = build_spec(self, shape)
-        return index_character(
-            self, built.shape, built.spec.compile(), built.legs, built.hip_height, built.lengths
-        )
+        shape = shape_with_defaults(self, shape)
+        dims = self.dimensions(shape)
+        model = build_spec(self, shape, dims).compile()
+        return index_character(self, shape, model, dims.legs, dims.hip_height, dims.lengths)
 
 
 @dataclass
@@ -152,23 +160,6 @@ def joint_names(definition) -> tuple[str, ...]:
     return tuple(j.name for j in definition.joints)
 
 
-def shape_with_defaults(
-    definition: CharacterDef, shape: dict[str, float] | None
-) -> dict[str, float]:
-    """Fill missing shape parameters with 1.0; reject names the character does not have."""
-    full = definition.default_shape()
-    for name, value in (shape or {}).items():
-        if name not in full:
-            raise KeyError(
-                f"character {definition.name!r} has no shape parameter {name!r}; "
-                f"it has {sorted(full)}"
-            )
-        if not np.isfinite(value) or value <= 0:
-            raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
-        full[name] = float(value)
-    return full
-
-
 def _scaled_segments(
     definition: CharacterDef, shape: dict[str, float]
 ) -> dict[str, tuple[float, float]]:
@@ -179,43 +170,74 @@ def _scaled_segments(
     }
 
 
-def build_spec(definition: CharacterDef, shape: dict[str, float] | None = None) -> MjSpecResult:
-    """F(B̄, b): a fresh MjSpec of the character with shape `b` standing on a ground plane."""
-    shape = shape_with_defaults(definition, shape)
+def planar_dimensions(definition: CharacterDef, shape: dict[str, float]) -> Dims:
+    """What the shape sets in a planar character: each segment's length and width scaled
+    (children attach at the parent's scaled start or end), the feet's boxes and contact points,
+    and the hip height at which the straight legs stand on the ground."""
     dims = _scaled_segments(definition, shape)
-    spec = world_spec(definition.name)
-
     legs = [sum(dims[s][0] for s in leg) for leg in definition.legs]
     foot_drop = max(_foot_thickness(definition, shape, f) for f in definition.feet)
     hip_height = max(legs) + foot_drop
-    bodies: dict[str, mujoco.MjsBody] = {}
+    by_name = {s.name: s for s in definition.segments}
+    bodies, geoms, sites = {}, {}, {}
     for seg in definition.segments:
         length, width = dims[seg.name]
         if seg.parent is None:
-            body = spec.worldbody.add_body(name=seg.name, pos=[0, 0, hip_height])
+            bodies[seg.name] = [0.0, 0.0, hip_height]
+        elif seg.attach == "start":
+            bodies[seg.name] = [0.0, 0.0, 0.0]
+        else:
+            parent = by_name[seg.parent]
+            bodies[seg.name] = (np.array(parent.direction) * dims[parent.name][0]).tolist()
+        if seg.kind == "capsule":
+            end = (np.array(seg.direction) * length).tolist()
+            geoms[seg.name] = {"fromto": [0, 0, 0, *end], "size": [width, 0, 0]}
+            sites[f"{seg.name}_end"] = end
+            continue
+        # Foot: a box from 25 % of its length behind the ankle to 75 % in front, below it.
+        thickness = seg.thickness * (width / seg.width)
+        x0, x1 = -0.25 * length, 0.75 * length
+        geoms[seg.name] = {
+            "size": [length / 2, width, thickness / 2],
+            "pos": [(x0 + x1) / 2, 0, -thickness / 2],
+        }
+        sites[f"{seg.name}_end"] = [x1, 0, -thickness / 2]
+        for i, (x, y) in enumerate([(x0, -width), (x0, width), (x1, -width), (x1, width)]):
+            sites[f"{seg.name}_c{i}"] = [x, y, -thickness]  # [WL19] Eq. 1 points
+    lengths = {k: v[0] for k, v in dims.items()}
+    return Dims(bodies, geoms, sites, np.array(legs), hip_height, lengths)
+
+
+def build_spec(
+    definition: CharacterDef, shape: dict[str, float] | None = None, dims: Dims | None = None
+) -> mujoco.MjSpec:
+    """F(B̄, b): a fresh MjSpec of the character with shape `b` standing on a ground plane."""
+    shape = shape_with_defaults(definition, shape)
+    dims = dims or planar_dimensions(definition, shape)
+    spec = world_spec(definition.name)
+    # Body geoms touch the floor but not each other (contype 1, conaffinity 0), as in gym envs.
+    common = dict(density=DENSITY, contype=1, conaffinity=0, rgba=[0.45, 0.6, 0.85, 1])
+    bodies: dict[str, mujoco.MjsBody] = {}
+    for seg in definition.segments:
+        parent = spec.worldbody if seg.parent is None else bodies[seg.parent]
+        body = parent.add_body(name=seg.name, pos=dims.bodies[seg.name])
+        if seg.parent is None:
             body.add_joint(name="rootx", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
             body.add_joint(name="rootz", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
             body.add_joint(name="rooty", type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(PLANAR_AXIS))
-        else:
-            parent = next(s for s in definition.segments if s.name == seg.parent)
-            p_len = dims[parent.name][0]
-            offset = np.zeros(3) if seg.attach == "start" else np.array(parent.direction) * p_len
-            body = bodies[seg.parent].add_body(name=seg.name, pos=offset.tolist())
         bodies[seg.name] = body
         if seg.joint is not None:
             add_hinge(body, seg.joint)
-        _add_geom(body, seg, length, width, shape)
+        kind = mujoco.mjtGeom.mjGEOM_CAPSULE if seg.kind == "capsule" else mujoco.mjtGeom.mjGEOM_BOX
+        body.add_geom(name=seg.name, type=kind, **dims.geoms[seg.name], **common)
+        for site, pos in dims.sites.items():
+            if site.rpartition("_")[0] == seg.name:
+                body.add_site(name=site, pos=pos)
     add_servos(spec, definition.joints)
     add_sensors(
         spec, [j.name for j in definition.joints], definition.end_effectors, definition.root
     )
-    return MjSpecResult(
-        spec=spec,
-        shape=shape,
-        legs=np.array(legs),
-        hip_height=hip_height,
-        lengths={k: v[0] for k, v in dims.items()},
-    )
+    return spec
 
 
 def world_spec(name: str, floor: bool = True, light_height: float = 4.0) -> mujoco.MjSpec:
@@ -248,15 +270,6 @@ def add_hinge(body: mujoco.MjsBody, joint: Joint) -> None:
         limited=mujoco.mjtLimited.mjLIMITED_TRUE,
         armature=0.01,
     )
-
-
-@dataclass
-class MjSpecResult:
-    spec: mujoco.MjSpec
-    shape: dict[str, float]
-    legs: np.ndarray
-    hip_height: float
-    lengths: dict[str, float]
 
 
 def add_servos(spec: mujoco.MjSpec, joints) -> None:
@@ -311,38 +324,6 @@ def add_sensors(
 def _foot_thickness(definition: CharacterDef, shape: dict[str, float], foot: str) -> float:
     seg = next(s for s in definition.segments if s.name == foot)
     return seg.thickness * definition.scales(shape)[foot][1]
-
-
-def _add_geom(
-    body: mujoco.MjsBody, seg: Segment, length: float, width: float, shape: dict[str, float]
-) -> None:
-    # Body geoms touch the floor but not each other (contype 1, conaffinity 0), as in gym envs.
-    common = dict(density=DENSITY, contype=1, conaffinity=0, rgba=[0.45, 0.6, 0.85, 1])
-    if seg.kind == "capsule":
-        end = (np.array(seg.direction) * length).tolist()
-        body.add_geom(
-            name=seg.name,
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[0, 0, 0, *end],
-            size=[width, 0, 0],
-            **common,
-        )
-        body.add_site(name=f"{seg.name}_end", pos=end)
-        return
-    # Foot: a box from 25 % of its length behind the ankle to 75 % in front, hanging below it.
-    thickness = seg.thickness * (width / seg.width)
-    x0, x1 = -0.25 * length, 0.75 * length
-    center = [(x0 + x1) / 2, 0, -thickness / 2]
-    body.add_geom(
-        name=seg.name,
-        type=mujoco.mjtGeom.mjGEOM_BOX,
-        size=[length / 2, width, thickness / 2],
-        pos=center,
-        **common,
-    )
-    body.add_site(name=f"{seg.name}_end", pos=[x1, 0, -thickness / 2])
-    for i, (x, y) in enumerate([(x0, -width), (x0, width), (x1, -width), (x1, width)]):
-        body.add_site(name=f"{seg.name}_c{i}", pos=[x, y, -thickness])  # [WL19] Eq. 1 points
 
 
 def index_character(

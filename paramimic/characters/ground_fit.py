@@ -52,10 +52,12 @@ class _Problem:
         self.q0 = np.array(q0, dtype=np.float64)
         self.targets, self.sites, self.weight = targets, sites, weight
         self.qadr, self.dofs = qadr, dofs  # x -> qpos addresses and dof columns
+        self.sites = [int(s) for s in sites]
         self.on_ground = np.flatnonzero(targets[:, 2] < ON_GROUND)
         self.off_ground = np.flatnonzero(targets[:, 2] >= ON_GROUND)
-        self._x: np.ndarray | None = None
+        self._key: bytes | None = None  # the x of the cached evaluation
         self._jac = np.zeros((3, model.nv))
+        self.jac = np.zeros((len(sites), 3, len(dofs)))  # [P, 3, X]
         self.on_ground = self._independent(self.on_ground)
 
     def _independent(self, points: np.ndarray) -> np.ndarray:
@@ -80,19 +82,18 @@ class _Problem:
         return q
 
     def _eval(self, x: np.ndarray) -> None:
-        if self._x is not None and np.array_equal(x, self._x):
+        key = np.asarray(x, np.float64).tobytes()
+        if key == self._key:
             return
         m, d = self.model, self.data
         d.qpos[:] = self.qpos(x)
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
-        self.points = d.site_xpos[self.sites].copy()  # [P, 3]
-        jac = np.zeros((len(self.sites), 3, len(self.dofs)))
+        self.points = d.site_xpos[self.sites]  # [P, 3] (a copy: fancy indexing)
         for k, s in enumerate(self.sites):
-            mujoco.mj_jacSite(m, d, self._jac, None, int(s))
-            jac[k] = self._jac[:, self.dofs]
-        self.jac = jac  # [P, 3, X]
-        self._x = x.copy()
+            mujoco.mj_jacSite(m, d, self._jac, None, s)
+            self.jac[k] = self._jac[:, self.dofs]
+        self._key = key
 
     def objective(self, x: np.ndarray) -> float:
         self._eval(x)

@@ -26,9 +26,9 @@ from paramimic.characters.body import (
     add_sensors,
     add_servos,
     index_character,
-    shape_with_defaults,
     world_spec,
 )
+from paramimic.characters.dimensions import Dims, shape_with_defaults
 from paramimic.characters.registry import Registration
 from paramimic.motion.clip import Clip, ClipPose, load_deepmimic
 
@@ -113,54 +113,72 @@ class HumanoidDef:
     def revolute(self) -> tuple[str, ...]:
         return tuple(j["Name"] for j in self.skeleton if j["Type"] == "revolute")
 
-    def compile(self, shape: dict[str, float] | None = None) -> Body:
-        shape = shape_with_defaults(self, shape)
-        model = self.spec(shape).compile()
-        legs = np.full(2, BASE_LEG * shape["height"] * shape["leg_length"])
-        foot = 0.05 * shape["height"]
-        return index_character(self, shape, model, legs, float(legs[0] + foot), {})
-
-    def spec(self, shape: dict[str, float] | None = None) -> mujoco.MjSpec:
-        """The humanoid with shape b: joint offsets along a limb scale with that limb's length
-        (the file's bodies hang along their local y), shapes scale in length and thickness, and
-        masses follow the shapes' volumes."""
-        shape = shape_with_defaults(self, shape)
-        spec = world_spec(self.name)
+    def dimensions(self, shape: dict[str, float]) -> Dims:
+        """What the shape sets: joint offsets along a limb scale with that limb's length (the
+        file's bodies hang along their local y), shapes scale in length and thickness, and
+        masses follow the shapes' volumes; the hip height of the straight legs."""
         shapes = {b["Name"]: b for b in self.description["BodyDefs"]}
-        bodies: dict[int, mujoco.MjsBody] = {}
+        bodies, geoms, sites = {}, {}, {}
         for j in self.skeleton:
-            parent = spec.worldbody if j["Parent"] < 0 else bodies[j["Parent"]]
             along = 1.0
             if j["Parent"] >= 0:
                 along = self.limb_scale(self.skeleton[j["Parent"]]["Name"], shape)
-            pos = (np.array([j["AttachX"], j["AttachY"], j["AttachZ"]]) * along).tolist()
-            body = parent.add_body(name=j["Name"], pos=pos)
+            attach = np.array([j["AttachX"], j["AttachY"], j["AttachZ"]])
+            bodies[j["Name"]] = (attach * along).tolist()
+            length = self.limb_scale(j["Name"], shape)
+            width = shape["height"] * shape["thickness"]
+            b = _scaled_shape(shapes[j["Name"]], length, width, shape["height"])
+            geoms[j["Name"]], corners = _shape_dims(b)
+            sites |= corners
+            if j["Name"] in self.end_effectors:
+                sites[f"{j['Name']}_end"] = [b["AttachX"], b["AttachY"], 0.0]
+        legs = np.full(2, BASE_LEG * shape["height"] * shape["leg_length"])
+        hip_height = float(legs[0] + 0.05 * shape["height"])
+        return Dims(bodies, geoms, sites, legs, hip_height, {})
+
+    def compile(self, shape: dict[str, float] | None = None) -> Body:
+        shape = shape_with_defaults(self, shape)
+        dims = self.dimensions(shape)
+        model = self.spec(shape, dims).compile()
+        return index_character(self, shape, model, dims.legs, dims.hip_height, dims.lengths)
+
+    def spec(self, shape: dict | None = None, dims: Dims | None = None) -> mujoco.MjSpec:
+        """The humanoid with shape b (see `dimensions`)."""
+        dims = dims or self.dimensions(shape_with_defaults(self, shape))
+        spec = world_spec(self.name)
+        shapes = {b["Name"]: b for b in self.description["BodyDefs"]}
+        # Body geoms touch the floor but not each other, as in DeepMimic's collision groups.
+        common = dict(contype=1, conaffinity=0, rgba=[0.47, 0.55, 0.69, 1])
+        bodies: dict[int, mujoco.MjsBody] = {}
+        for j in self.skeleton:
+            name = j["Name"]
+            parent = spec.worldbody if j["Parent"] < 0 else bodies[j["Parent"]]
+            body = parent.add_body(name=name, pos=dims.bodies[name])
             bodies[j["ID"]] = body
             if j["Parent"] < 0:
                 body.add_freejoint(name="root")
             elif j["Type"] == "spherical":
                 for axis in AXES:
                     body.add_joint(
-                        name=f"{j['Name']}_{axis}",
+                        name=f"{name}_{axis}",
                         type=mujoco.mjtJoint.mjJNT_HINGE,
                         axis=[float(axis == a) for a in AXES],
                         armature=0.01,
                     )
             elif j["Type"] == "revolute":
                 body.add_joint(
-                    name=j["Name"],
+                    name=name,
                     type=mujoco.mjtJoint.mjJNT_HINGE,
                     axis=[0, 0, 1],
                     range=[j["LimLow0"], j["LimHigh0"]],
                     limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                     armature=0.01,
                 )
-            length = self.limb_scale(j["Name"], shape)
-            width = shape["height"] * shape["thickness"]
-            b = _scaled_shape(shapes[j["Name"]], length, width, shape["height"])
-            _add_shape(body, b)
-            if j["Name"] in self.end_effectors:
-                body.add_site(name=f"{j['Name']}_end", pos=[b["AttachX"], b["AttachY"], 0])
+            kind = _GEOM_TYPES[shapes[name]["Shape"]]
+            body.add_geom(name=name, type=kind, **dims.geoms[name], **common)
+            for site in (*(f"{name}_c{i}" for i in range(4)), f"{name}_end"):
+                if site in dims.sites:
+                    body.add_site(name=site, pos=dims.sites[site])
         add_servos(spec, self.joints)
         add_sensors(spec, [j.name for j in self.joints], self.end_effectors, self.root)
         return spec
@@ -213,31 +231,33 @@ def _scaled_shape(b: dict, length: float, width: float, height: float) -> dict:
     return out
 
 
-def _add_shape(body: mujoco.MjsBody, b: dict) -> None:
-    """A DeepMimic body shape: sphere (Param0 = diameter), capsule along local y (Param0 =
-    diameter, Param1 = cylinder length) or box (Param0..2 = full sizes), with its mass."""
+_GEOM_TYPES = {
+    "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+    "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
+    "box": mujoco.mjtGeom.mjGEOM_BOX,
+}
+
+
+def _shape_dims(b: dict) -> tuple[dict, dict[str, list[float]]]:
+    """A DeepMimic body shape as geom attributes with its mass: sphere (Param0 = diameter),
+    capsule along local y (Param0 = diameter, Param1 = cylinder length) or box (Param0..2 =
+    full sizes, its sole's corners as contact sites)."""
     center = np.array([b["AttachX"], b["AttachY"], b["AttachZ"]])
-    # Body geoms touch the floor but not each other, as in DeepMimic's collision groups.
-    common = dict(mass=float(b["Mass"]), contype=1, conaffinity=0, rgba=[0.47, 0.55, 0.69, 1])
-    geom = mujoco.mjtGeom
+    mass = float(b["Mass"])
     if b["Shape"] == "sphere":
-        body.add_geom(type=geom.mjGEOM_SPHERE, pos=center, size=[b["Param0"] / 2, 0, 0], **common)
-    elif b["Shape"] == "capsule":
+        return {"pos": center.tolist(), "size": [b["Param0"] / 2, 0, 0], "mass": mass}, {}
+    if b["Shape"] == "capsule":
         half = np.array([0.0, b["Param1"] / 2, 0.0])
-        body.add_geom(
-            type=geom.mjGEOM_CAPSULE,
-            fromto=[*(center - half), *(center + half)],
-            size=[b["Param0"] / 2, 0, 0],
-            **common,
-        )
-    elif b["Shape"] == "box":
+        fromto = [*(center - half), *(center + half)]
+        return {"fromto": fromto, "size": [b["Param0"] / 2, 0, 0], "mass": mass}, {}
+    if b["Shape"] == "box":
         half = np.array([b["Param0"], b["Param1"], b["Param2"]]) / 2
-        body.add_geom(type=geom.mjGEOM_BOX, pos=center, size=half, **common)
-        for i, (sx, sz) in enumerate([(-1, -1), (-1, 1), (1, -1), (1, 1)]):
-            corner = center + half * np.array([sx, -1.0, sz])  # the sole: lowest face in y
-            body.add_site(name=f"{b['Name']}_c{i}", pos=corner)
-    else:
-        raise ValueError(f"unknown DeepMimic shape {b['Shape']!r} of body {b['Name']!r}")
+        corners = {
+            f"{b['Name']}_c{i}": (center + half * np.array([sx, -1.0, sz])).tolist()
+            for i, (sx, sz) in enumerate([(-1, -1), (-1, 1), (1, -1), (1, 1)])
+        }  # the sole: lowest face in y
+        return {"pos": center.tolist(), "size": half.tolist(), "mass": mass}, corners
+    raise ValueError(f"unknown DeepMimic shape {b['Shape']!r} of body {b['Name']!r}")
 
 
 HUMANOID = HumanoidDef()

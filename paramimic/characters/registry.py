@@ -16,9 +16,11 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Protocol, runtime_checkable
 
+import mujoco
 import numpy as np
 
 from paramimic.characters.body import Body, Joint, ShapeParam
+from paramimic.characters.dimensions import Dims
 from paramimic.motion.clip import Clip, ClipPose
 from paramimic.motion.procedural import SinusoidalMotion
 
@@ -50,6 +52,10 @@ class Character(Protocol):
     def param_names(self) -> tuple[str, ...]: ...
 
     def default_shape(self) -> dict[str, float]: ...
+
+    def dimensions(self, shape: dict[str, float]) -> Dims: ...  # what b sets (all of b given)
+
+    def spec(self, shape: dict[str, float] | None = None) -> mujoco.MjSpec: ...  # F(B̄, b)
 
     def compile(self, shape: dict[str, float] | None = None) -> Body: ...
 

@@ -10,7 +10,7 @@ observation, reward and termination.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import Body, registration
+from paramimic.characters.dimensions import Reshaper
 from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
 from paramimic.config import EnvConfig
 from paramimic.task_space import TaskSpace
@@ -29,10 +30,37 @@ INSTABILITY = slice(
 MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
 
 
+@lru_cache(maxsize=1)
+def _size_names() -> tuple[str, ...]:
+    model = mujoco.MjModel.from_xml_string("<mujoco/>")
+    return tuple(n for n in dir(model) if n.startswith("n") and isinstance(getattr(model, n), int))
+
+
+def _layout(model: mujoco.MjModel) -> tuple[int, ...]:
+    """Every size of a model (nq, nv, nbody, ..., narena): equal for all shapes of a body."""
+    return tuple(getattr(model, n) for n in _size_names())
+
+
+def reusable_data(model: mujoco.MjModel, data: mujoco.MjData | None) -> mujoco.MjData:
+    """`data` reset for `model` when it was made for a model of the same sizes (another shape of
+    the same body: mjData holds no pointer to its model, and allocating one costs more than
+    the rest of a reset), else a new MjData."""
+    if data is not None and _layout(data.model) == _layout(model):
+        mujoco.mj_resetData(model, data)
+        return data
+    return mujoco.MjData(model)
+
+
+@cache
+def _reshaper(character: str) -> Reshaper:
+    return Reshaper(registration(character).character)
+
+
 @lru_cache(maxsize=32)
 def compiled_body(character: str, shape: tuple[tuple[str, float], ...]) -> Body:
-    """F(B̄, b) compiled, cached per (character, shape): shared, never modified by the envs."""
-    return registration(character).character.compile(dict(shape))
+    """F(B̄, b) compiled (by editing the character's one spec), cached per (character, shape):
+    shared, never modified by the envs."""
+    return _reshaper(character)(dict(shape))
 
 
 class EnvCore(gym.Env):
@@ -114,7 +142,7 @@ class EnvCore(gym.Env):
     def _bind(self, body: Body) -> None:
         """Set up model, data and what depends on the body (subclasses extend it)."""
         self.model = body.model
-        self.data = mujoco.MjData(self.model)
+        self.data = reusable_data(body.model, getattr(self, "data", None))
 
     # --- ground, divergence, falls ----------------------------------------------------------------
 
@@ -186,25 +214,28 @@ class EnvCore(gym.Env):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
             a[shape_dims[name]] = float(value)
-        old, body_before = self.data, self.character
+        old = self.data  # its state, kept before the data may be reset for the new body
+        qpos, qvel, ctrl, time = old.qpos.copy(), old.qvel.copy(), old.ctrl.copy(), old.time
+        com_before = old.sensordata[self.character.com_sensor].copy()
         self._task = a
         self._load(a)
         d = self.data
-        d.qpos[:], d.qvel[:], d.ctrl[:] = old.qpos, old.qvel, old.ctrl
-        d.time = old.time
+        d.qpos[:], d.qvel[:], d.ctrl[:] = qpos, qvel, ctrl
+        d.time = time
         mujoco.mj_forward(self.model, d)
         depth = -min((d.contact.dist[i] for i in range(d.ncon)), default=0.0)
         if depth > 0:  # lift until no penetration
             d.qpos[self._height_adr] += depth + 1e-4
             mujoco.mj_forward(self.model, d)
         self._watch_stability()
-        self._shape_changed(old, body_before)
+        self._shape_changed(com_before)
         obs = self._observe()
         self._last_obs = obs
         return obs
 
-    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
-        """What a subclass carries over to the new body after `set_shape`."""
+    def _shape_changed(self, com_before: np.ndarray) -> None:
+        """What a subclass carries over to the new body after `set_shape` (the whole-body COM
+        before the change [3] given)."""
 
     def _observe(self) -> np.ndarray:
         raise NotImplementedError

@@ -118,24 +118,20 @@ class ParamEnv(EnvCore):
         lists, so that a lookup is one multiply-add (indexing a list is cheaper per step).
         """
         c, d, m = self.character, self.data, self.model
-        rows = []
-        for k in range(REFERENCE_SAMPLES + 1):
-            phi = k / REFERENCE_SAMPLES
-            mujoco.mj_resetData(m, d)
-            d.qpos[c.qpos_idx] = self.motion.pose(phi)
-            mujoco.mj_fwdPosition(m, d)
-            self._sense()
-            rows.append(
-                np.concatenate(
-                    [
-                        self.motion.pose(phi),
-                        self.motion.velocity(phi),
-                        d.sensordata[c.ee_sensor],
-                        np.zeros(len(c.qpos_idx)),
-                    ]
-                )
-            )
-        table = np.array(rows)
+        phis = np.arange(REFERENCE_SAMPLES + 1) / REFERENCE_SAMPLES
+        poses = np.array([self.motion.pose(phi) for phi in phis])
+        ee = np.empty((len(phis), len(c.ee_site_ids), 3))
+        d.qpos[:] = m.qpos0
+        for k, pose in enumerate(poses):
+            d.qpos[c.qpos_idx] = pose
+            mujoco.mj_kinematics(m, d)
+            # what the end-effector sensors measure: sites in the root's inertial frame (a
+            # FRAMEPOS sensor's body reference); kinematics alone, no dynamics or collisions
+            rot = d.ximat[c.root_body_id].reshape(3, 3)
+            ee[k] = (d.site_xpos[c.ee_site_ids] - d.xipos[c.root_body_id]) @ rot
+        velocities = np.array([self.motion.velocity(phi) for phi in phis])
+        torques = np.zeros_like(poses)
+        table = np.concatenate([poses, velocities, ee.reshape(len(phis), -1), torques], axis=1)
         return list(table), list(np.diff(table, axis=0))
 
     def _reference_at(self, phase: float) -> np.ndarray:
@@ -201,14 +197,12 @@ class ParamEnv(EnvCore):
         self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
         self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
 
-    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
+    def _shape_changed(self, com_before: np.ndarray) -> None:
         """Targets follow the new body; the average COM velocity continues: its history shifts
         by the COM's jump."""
         self._sense()
         self._set_targets()
-        shift = (
-            self.data.sensordata[self.character.com_sensor] - old.sensordata[body_before.com_sensor]
-        )
+        shift = self.data.sensordata[self.character.com_sensor] - com_before
         self._com = [tuple((np.array(p) + shift).tolist()) for p in self._com]
 
     # --- step ---------------------------------------------------------------------------------

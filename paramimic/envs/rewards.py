@@ -14,7 +14,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-
 _XYZ = np.ones(3)  # sums the squared x, y, z of each end-effector error
 
 
