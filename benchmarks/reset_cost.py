@@ -84,7 +84,7 @@ def steps_with_resets(cfg, steps: int = 3000) -> dict:
         if term or trunc:
             env.reset()
     env_sps = steps / (time.perf_counter() - t)
-    base = compiled_body(cfg.character, ())
+    base = compiled_body(cfg.character, (), 1.0 / cfg.env.physics_hz)
     d = mujoco.MjData(base.model)
     t = time.perf_counter()
     for _ in range(steps):

@@ -80,8 +80,10 @@ class SkillConfig(Section):
 class EnvConfig(Section):
     """Simulation, observation, reward and termination of ParamEnv."""
 
-    frame_skip: int = Field(
-        20, ge=1, description="physics steps per control step: 600 Hz / 30 Hz ([WL19] Table 2)"
+    physics_hz: int = Field(600, ge=30, description="physics rate ([WL19] Table 2: 600 Hz)")
+    control_hz: int = Field(30, ge=1, description="policy rate ([WL19] Table 2: 30 Hz)")
+    frame_skip: int | None = Field(
+        None, ge=1, description="physics steps per control step: physics_hz / control_hz"
     )
     max_episode_seconds: PositiveFloat = Field(30.0, description="time limit ([WL19] Table 2)")
     action_scale: PositiveFloat = Field(0.5, description="rad of PD target offset per unit action")
@@ -106,6 +108,24 @@ class EnvConfig(Section):
         None, description="imitate this clip in continuous time ([L21]); None: [WL19] gaits"
     )
     skill: SkillConfig = SkillConfig()
+
+
+    @model_validator(mode="after")
+    def _rates(self) -> EnvConfig:
+        if self.physics_hz % self.control_hz:
+            raise ValueError(
+                f"physics_hz ({self.physics_hz}) must be a multiple of control_hz "
+                f"({self.control_hz})"
+            )
+        steps = self.physics_hz // self.control_hz
+        if self.frame_skip is None:
+            object.__setattr__(self, "frame_skip", steps)
+        elif self.frame_skip != steps:
+            raise ValueError(
+                f"frame_skip {self.frame_skip} != physics_hz / control_hz = {steps}; "
+                "set physics_hz and control_hz instead"
+            )
+        return self
 
 
 class PPOConfig(Section):

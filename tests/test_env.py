@@ -23,6 +23,15 @@ def test_registered_envs_pass_gymnasium_checks(env_id):
     env.close()
 
 
+def test_gym_make_takes_the_env_section_as_config():
+    """As Stable-Baselines3 and RLlib make it: gym.make(id, config={...})."""
+    env = gym.make("paramimic/Walker-v0", config={"max_episode_seconds": 2.0, "physics_hz": 300})
+    u = env.unwrapped
+    assert u.config.max_episode_seconds == 2.0 and u.frame_skip == 10
+    assert u.model.opt.timestep == pytest.approx(1 / 300)
+    env.close()
+
+
 def test_reset_uses_the_given_task_and_builds_that_body():
     env = ParamEnv("walker", LEGS)
     obs, info = env.reset(

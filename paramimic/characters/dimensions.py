@@ -61,12 +61,15 @@ class Reshaper:
         self.character = character
         base = character.default_shape()
         self.spec = character.spec(base)
+        self.default_timestep = self.spec.option.timestep
         self.template = character.compile(base)  # indices: the same for every shape
 
-    def __call__(self, shape: dict[str, float] | None = None):
+    def __call__(self, shape: dict[str, float] | None = None, timestep: float | None = None):
+        """The Body of `shape`, simulated at `timestep` (s; default: the character's)."""
         shape = shape_with_defaults(self.character, shape)
         dims = self.character.dimensions(shape)
         apply_dims(self.spec, dims)
+        self.spec.option.timestep = timestep or self.default_timestep
         model = self.spec.compile()
         return replace(
             self.template,

@@ -56,8 +56,7 @@ class _Problem:
         self.on_ground = np.flatnonzero(targets[:, 2] < ON_GROUND)
         self.off_ground = np.flatnonzero(targets[:, 2] >= ON_GROUND)
         self._key: bytes | None = None  # the x of the cached evaluation
-        self._jac = np.zeros((3, model.nv))
-        self.jac = np.zeros((len(sites), 3, len(dofs)))  # [P, 3, X]
+        self._jac = np.zeros((len(sites), 3, model.nv))  # every site's full Jacobian
         self.on_ground = self._independent(self.on_ground)
 
     def _independent(self, points: np.ndarray) -> np.ndarray:
@@ -91,8 +90,8 @@ class _Problem:
         mujoco.mj_comPos(m, d)
         self.points = d.site_xpos[self.sites]  # [P, 3] (a copy: fancy indexing)
         for k, s in enumerate(self.sites):
-            mujoco.mj_jacSite(m, d, self._jac, None, s)
-            self.jac[k] = self._jac[:, self.dofs]
+            mujoco.mj_jacSite(m, d, self._jac[k], None, s)
+        self.jac = self._jac[:, :, self.dofs]  # [P, 3, X]
         self._key = key
 
     def objective(self, x: np.ndarray) -> float:

@@ -73,7 +73,7 @@ class Registration:
     character: Character
     gait: SinusoidalMotion | None = None  # [WL19] §5.3 reference gait (ParamEnv)
     clips: Mapping[str, Callable[[], Clip]] = field(default_factory=dict)  # [L21] (SkillEnv)
-    # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "env_config"); every
+    # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "config"); every
     # character also gets `paramimic/<Name>-v0` and one env per clip
     envs: Mapping[str, Mapping] = field(default_factory=dict)
 
@@ -109,7 +109,7 @@ class Registration:
         for i, clip in enumerate(self.clips):
             stem = camel(clip)
             stem = stem if stem.startswith(self.title) else self.title + stem
-            kwargs = {"character": self.name, "env_config": {"clip": clip}}
+            kwargs = {"character": self.name, "config": {"clip": clip}}
             specs[f"paramimic/{stem}-v0"] = kwargs
             if i == 0 and self.gait is None:
                 specs[f"paramimic/{self.title}-v0"] = kwargs

@@ -16,15 +16,11 @@ from paramimic.envs.skill_env import SkillEnv
 def make_env(
     character: str,
     task: Mapping | None = None,
-    env_config: EnvConfig | Mapping | None = None,
+    config: EnvConfig | Mapping | None = None,
 ) -> ParamEnv | SkillEnv:
     """The environment of an experiment: the continuous-time SkillEnv ([L21]) when `env.clip`
     names a clip, else ParamEnv ([WL19] gaits)."""
-    cfg = (
-        env_config
-        if isinstance(env_config, EnvConfig)
-        else EnvConfig.model_validate(env_config or {})
-    )
+    cfg = config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
     env = SkillEnv if cfg.clip else ParamEnv
     return env(character=character, task=task, config=cfg)
 

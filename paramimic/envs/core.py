@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import Body, registration
+from paramimic.characters.body import TIMESTEP
 from paramimic.characters.dimensions import Reshaper
 from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
 from paramimic.config import EnvConfig
@@ -57,10 +58,12 @@ def _reshaper(character: str) -> Reshaper:
 
 
 @lru_cache(maxsize=32)
-def compiled_body(character: str, shape: tuple[tuple[str, float], ...]) -> Body:
-    """F(B̄, b) compiled (by editing the character's one spec), cached per (character, shape):
-    shared, never modified by the envs."""
-    return _reshaper(character)(dict(shape))
+def compiled_body(
+    character: str, shape: tuple[tuple[str, float], ...], timestep: float = TIMESTEP
+) -> Body:
+    """F(B̄, b) compiled (by editing the character's one spec) for a physics time step, cached
+    per (character, shape, time step): shared by the envs of a process."""
+    return _reshaper(character)(dict(shape), timestep)
 
 
 class EnvCore(gym.Env):
@@ -93,7 +96,8 @@ class EnvCore(gym.Env):
         self._shape_idx = [(n, i) for i, n in enumerate(names) if n in shape_names]
         self._task = self.task_space.center.copy()
         self.frame_skip = self.config.frame_skip
-        self._base = compiled_body(self.definition.name, ())
+        self._timestep = 1.0 / self.config.physics_hz
+        self._base = compiled_body(self.definition.name, (), self._timestep)
         self._base_data = mujoco.MjData(self._base.model)
         self.character: Body | None = None
         self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
@@ -128,7 +132,7 @@ class EnvCore(gym.Env):
     def body_for(self, task: np.ndarray) -> Body:
         """The compiled body of the shape part of `task`."""
         shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
-        return compiled_body(self.definition.name, shape)
+        return compiled_body(self.definition.name, shape, self._timestep)
 
     def _load(self, task: np.ndarray) -> bool:
         """Make the body of `task` current (its model and data); False if it already was."""

@@ -119,7 +119,7 @@ class ParamEnv(EnvCore):
         """
         c, d, m = self.character, self.data, self.model
         phis = np.arange(REFERENCE_SAMPLES + 1) / REFERENCE_SAMPLES
-        poses = np.array([self.motion.pose(phi) for phi in phis])
+        poses = self.motion.pose(phis)
         ee = np.empty((len(phis), len(c.ee_site_ids), 3))
         d.qpos[:] = m.qpos0
         for k, pose in enumerate(poses):
@@ -129,7 +129,7 @@ class ParamEnv(EnvCore):
             # FRAMEPOS sensor's body reference); kinematics alone, no dynamics or collisions
             rot = d.ximat[c.root_body_id].reshape(3, 3)
             ee[k] = (d.site_xpos[c.ee_site_ids] - d.xipos[c.root_body_id]) @ rot
-        velocities = np.array([self.motion.velocity(phi) for phi in phis])
+        velocities = self.motion.velocity(phis)
         torques = np.zeros_like(poses)
         table = np.concatenate([poses, velocities, ee.reshape(len(phis), -1), torques], axis=1)
         return list(table), list(np.diff(table, axis=0))

@@ -32,13 +32,14 @@ class SinusoidalMotion:
         """The mean pose of the cycle (the offsets): the posture a body stands or floats in."""
         return self.offset.copy()
 
-    def pose(self, phi: float) -> np.ndarray:
-        x = TWO_PI * (phi + self.phase)
+    def pose(self, phi: float | np.ndarray) -> np.ndarray:
+        """q(φ) [J], or [n, J] for n phases."""
+        x = TWO_PI * (np.asarray(phi)[..., None] + self.phase)
         return self.offset + self.amp1 * np.sin(x) + self.amp2 * np.sin(2.0 * x)
 
-    def velocity(self, phi: float) -> np.ndarray:
-        """dq/dt in rad/s when φ advances at 1/period cycles per second."""
-        x = TWO_PI * (phi + self.phase)
+    def velocity(self, phi: float | np.ndarray) -> np.ndarray:
+        """dq/dt in rad/s when φ advances at 1/period cycles per second: [J] or [n, J]."""
+        x = TWO_PI * (np.asarray(phi)[..., None] + self.phase)
         return (TWO_PI / self.period) * (self.amp1 * np.cos(x) + 2.0 * self.amp2 * np.cos(2.0 * x))
 
 
