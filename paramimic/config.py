@@ -109,7 +109,6 @@ class EnvConfig(Section):
     )
     skill: SkillConfig = SkillConfig()
 
-
     @model_validator(mode="after")
     def _rates(self) -> EnvConfig:
         if self.physics_hz % self.control_hz:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from paramimic.envs import ParamEnv
-from paramimic.rl.networks import ActorCritic, NumpyPolicy
+from paramimic.rl.networks import ActorCritic
 from paramimic.task_space import TaskSpace
 
 
@@ -34,7 +34,7 @@ Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n,
 
 def deterministic(policy: ActorCritic) -> Act:
     """The policy's mean action."""
-    fast = NumpyPolicy(policy)
+    fast = policy.numpy_policy()
     return lambda obs: fast.act(obs, None)[0]
 
 

@@ -71,7 +71,6 @@ def skill_run(redis_server, tmp_path_factory):
         4,
         probe.observation_space.shape[0],
         probe.action_space.shape[0],
-        (8,),
         seed=0,
         task_source=lambda n: sampler.next_deal(n, "test"),
     )

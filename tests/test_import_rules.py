@@ -25,7 +25,6 @@ LAYERS = [
 TORCH_MODULES = {
     "paramimic.rl.networks",
     "paramimic.rl.ppo",
-    "paramimic.rl.rollout",
     "paramimic.curriculum.marginal_value",
     "paramimic.curriculum.parameterization_net",
 }
@@ -112,4 +111,13 @@ def test_pure_modules_load_neither_torch_nor_mujoco(module):
     code = (
         f"import sys, {module}; bad = {{'torch', 'mujoco'}} & set(sys.modules); assert not bad, bad"
     )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+@pytest.mark.parametrize(
+    "module", ["paramimic.rl.rollout", "services.actors.rollout_actor", "services.sampler.actor"]
+)
+def test_rollout_actors_and_the_sampler_load_no_torch(module):
+    """Actors act with numpy weights: torch would be most of their memory."""
+    code = f"import sys, {module}; assert 'torch' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)

@@ -39,14 +39,16 @@ def test_running_mean_std_matches_batch_statistics():
 def test_numpy_policy_is_the_same_function_as_the_torch_one():
     import torch
 
-    from paramimic.rl.networks import ActorCritic, NumpyPolicy
+    from paramimic.rl.networks import ActorCritic
+    from paramimic.rl.numpy_mlp import NumpyPolicy
 
     torch.manual_seed(0)
-    policy = ActorCritic(11, 3, (32, 32), init_log_std=-0.7)
+    policy = ActorCritic(11, 3, (32, 32), init_log_std=-0.7, obs_clip=3.0)
     stats = RunningMeanStd(11)
     stats.update(np.random.default_rng(0).normal(2.0, 3.0, (100, 11)))
     policy.set_normalizer(stats)
-    fast = NumpyPolicy(policy)
+    fast = NumpyPolicy(policy.numpy_weights())  # what a rollout actor gets, without torch
+    assert fast.obs_clip == 3.0
     rng = np.random.default_rng(1)
     obs = rng.normal(0, 5, (7, 11)).astype(np.float32)
     noise = rng.standard_normal((7, 3))

@@ -16,7 +16,6 @@ def _worker(seed=3, source=None):
         num_envs=3,
         obs_dim=obs_dim,
         act_dim=act_dim,
-        hidden=(32, 32),
         seed=seed,
         task_source=source,
     )

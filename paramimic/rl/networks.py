@@ -6,7 +6,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from paramimic.rl.numpy_mlp import Layers, numpy_forward
+from paramimic.rl.numpy_mlp import Layers, NumpyPolicy
 
 
 class RunningMeanStd:
@@ -115,44 +115,18 @@ class ActorCritic(nn.Module):
         logp = self.log_prob(mean, actions)
         return actions.numpy(), logp.numpy(), value.numpy()
 
+    def numpy_weights(self) -> dict[str, np.ndarray]:
+        """Everything an actor needs to act, as float32 numpy arrays (no torch needed to read
+        them): the networks, log σ, the normalizer and its clip."""
+        state = {k: v.detach().numpy().astype(np.float32) for k, v in self.state_dict().items()}
+        return state | {"obs_clip": np.float32(self.obs_clip)}
+
+    def numpy_policy(self) -> NumpyPolicy:
+        return NumpyPolicy(self.numpy_weights())
+
     @torch.no_grad()
     def value(self, obs: np.ndarray) -> np.ndarray:
         return self(torch.from_numpy(np.asarray(obs, dtype=np.float32)))[1].numpy()
-
-
-class NumpyPolicy:
-    """An inference copy of an ActorCritic in numpy: the same function without torch's per-op
-    overhead, which dominates for the small batches a rollout worker steps (M envs)."""
-
-    def __init__(self, policy: ActorCritic) -> None:
-        state = {k: v.detach().numpy().astype(np.float32) for k, v in policy.state_dict().items()}
-        self.obs_mean, self.obs_std = state["obs_mean"], state["obs_std"]
-        self.obs_clip = np.float32(policy.obs_clip)
-        self.pi = numpy_layers(policy.pi)
-        self.v = numpy_layers(policy.v)
-        self.log_std = state["log_std"]
-        self.std = np.exp(self.log_std)
-        self.act_dim = policy.act_dim
-        self._logp_const = np.float32(-self.log_std.sum() - 0.5 * np.log(2 * np.pi) * self.act_dim)
-
-    def _normalize(self, obs: np.ndarray) -> np.ndarray:
-        x = (np.asarray(obs, dtype=np.float32) - self.obs_mean) / self.obs_std
-        return np.clip(x, -self.obs_clip, self.obs_clip, out=x)
-
-    def act(self, obs: np.ndarray, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """Actions, log-probs and values for a batch; `noise=None` acts deterministically."""
-        x = self._normalize(obs)
-        mean = numpy_forward(self.pi, x)
-        value = numpy_forward(self.v, x)[:, 0]
-        if noise is None:
-            return mean, np.full(len(x), self._logp_const, np.float32), value
-        noise = noise.astype(np.float32)
-        actions = mean + self.std * noise
-        logp = -0.5 * np.square(noise).sum(axis=-1) + self._logp_const  # z = noise
-        return actions, logp.astype(np.float32), value
-
-    def value(self, obs: np.ndarray) -> np.ndarray:
-        return numpy_forward(self.v, self._normalize(obs))[:, 0]
 
 
 def numpy_layers(seq: nn.Sequential) -> Layers:

@@ -77,9 +77,10 @@ class PPOLearner:
         self.rng = np.random.default_rng(seed)
         self.version = 0  # policy version, +1 per update
 
-    def weights(self) -> dict[str, torch.Tensor]:
-        """Everything an actor needs to act: network weights and normalizer buffers."""
-        return {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+    def weights(self) -> dict[str, np.ndarray]:
+        """Everything an actor needs to act, as numpy (actors do not load torch): network
+        weights, log σ, the normalizer and its clip."""
+        return self.policy.numpy_weights()
 
     def build_batch(self, fragments: list[Fragment]) -> Batch:
         """Variable time-step GAE per fragment ([L21] Eq. 9), then flatten."""

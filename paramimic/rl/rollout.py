@@ -7,15 +7,14 @@ an `EpisodeSummary`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from paramimic.config import ActorsConfig
 from paramimic.envs import ParamEnv
-from paramimic.rl.networks import ActorCritic, NumpyPolicy
+from paramimic.rl.numpy_mlp import NumpyPolicy
 
 # n -> [n, d] task parameters, or a deal: {"tasks": [n, d], "motions": [n, K, D] | None, ...}
 # (the [L21] curriculum's tasks with the motions m_a to imitate and the batch they belong to)
@@ -114,16 +113,14 @@ class RolloutWorker:
         num_envs: int,
         obs_dim: int,
         act_dim: int,
-        hidden: tuple[int, ...],
         seed: int,
         worker_id: int = 0,
         task_source: TaskSource | None = None,
         id_prefix: str = "",
     ) -> None:
         self.envs = [make_env() for _ in range(num_envs)]
-        self.policy = ActorCritic(obs_dim, act_dim, hidden, init_log_std=0.0)
-        self.policy.eval()
-        self.fast_policy = NumpyPolicy(self.policy)
+        self.obs_dim, self.act_dim = obs_dim, act_dim
+        self.fast_policy: NumpyPolicy | None = None  # until the first weights arrive
         self.policy_version = -1
         self.rng = np.random.default_rng(seed)
         self.worker_id = worker_id
@@ -134,10 +131,10 @@ class RolloutWorker:
         self._obs: np.ndarray | None = None
         self._ep: list[dict] = []
 
-    def set_weights(self, weights: dict[str, torch.Tensor], version: int) -> None:
+    def set_weights(self, weights: Mapping[str, np.ndarray], version: int) -> None:
+        """The learner's policy (`ActorCritic.numpy_weights`; tensors work too) as `version`."""
         if version != self.policy_version:
-            self.policy.load_state_dict(weights)
-            self.fast_policy = NumpyPolicy(self.policy)
+            self.fast_policy = NumpyPolicy({k: np.asarray(v) for k, v in weights.items()})
             self.policy_version = version
 
     def _tasks(self, n: int) -> list[dict] | None:
@@ -194,7 +191,9 @@ class RolloutWorker:
             self.task_source = TaskQueue(tasks)
         if self._obs is None:
             self._reset_all()
-        buf = _Buffers(num_steps, len(self.envs), self._obs.shape[1], self.policy.act_dim)
+        if use_policy and self.fast_policy is None:
+            raise RuntimeError("set_weights before collecting with the policy")
+        buf = _Buffers(num_steps, len(self.envs), self._obs.shape[1], self.act_dim)
         run = _Run(tasks=[ep["task"] for ep in self._ep], current=np.arange(len(self.envs)))
         obs = self._obs
         for t in range(num_steps):
@@ -216,8 +215,8 @@ class RolloutWorker:
         if not use_policy:
             m = len(obs)
             zeros = np.zeros(m, np.float32)
-            return np.zeros((m, self.policy.act_dim), np.float32), zeros, zeros
-        noise = self.rng.standard_normal((len(obs), self.policy.act_dim))
+            return np.zeros((m, self.act_dim), np.float32), zeros, zeros
+        noise = self.rng.standard_normal((len(obs), self.act_dim))
         return self.fast_policy.act(obs, noise)
 
     def _finish_episodes(self, t: int, results: list[tuple], run: _Run) -> np.ndarray:
@@ -252,6 +251,9 @@ class RolloutWorker:
         the fragment, and V(final obs) where an episode was truncated."""
         next_values = np.empty_like(values)
         next_values[:-1] = values[1:]
+        if self.fast_policy is None:  # zero actions and values: nothing to bootstrap
+            next_values[-1] = 0.0
+            return next_values
         next_values[-1] = self.fast_policy.value(last_obs)
         if final_obs:
             vals = self.fast_policy.value(np.stack([o for _, _, o in final_obs]))

@@ -14,7 +14,6 @@ import resource
 
 import numpy as np
 import ray
-import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
@@ -33,7 +32,6 @@ class RolloutActor:
         worker_id: int,
         sampler: str | None = None,
     ) -> None:
-        torch.set_num_threads(1)
         cfg = ExperimentConfig.model_validate(config)
         # the named sampler actor (looked up by name: a handle argument would live in the object
         # store, which a restarted actor cannot rely on)
@@ -47,7 +45,6 @@ class RolloutActor:
             cfg.actors.num_envs,
             obs_dim,
             act_dim,
-            cfg.ppo.hidden_sizes,
             seed=seed,
             worker_id=worker_id,
             # episode ids stay unique across restarts and resumed runs (the sampler dedupes by id)

@@ -20,7 +20,6 @@ import time
 
 import numpy as np
 import ray
-import torch
 from ray.exceptions import RayActorError
 
 from paramimic.config import ExperimentConfig
@@ -136,7 +135,7 @@ class RayBackend:
         )
         self.pending[ref] = i
 
-    def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:
+    def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]:
         """Fragments totalling about ppo.num_steps transitions (one per live actor)."""
         self._check_nodes(force=True)
         self.pool.top_up()

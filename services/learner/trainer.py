@@ -62,7 +62,7 @@ class Curriculum(Protocol):
 
 
 class RolloutBackend(Protocol):
-    def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]: ...
+    def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]: ...
 
     def stats(self) -> dict: ...
 
@@ -89,12 +89,11 @@ class SerialBackend:
             m,
             obs_dim,
             act_dim,
-            cfg.ppo.hidden_sizes,
             seed=cfg.train.seed + 1,
             worker_id=0,
         )
 
-    def collect(self, weights: dict[str, torch.Tensor], version: int) -> list[Fragment]:
+    def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]:
         self.worker.set_weights(weights, version)
         fragment = self.worker.collect(self.steps, self.curriculum.next_deal(self.n_tasks))
         self.curriculum.ingest([e.to_dict() for e in fragment.episodes])

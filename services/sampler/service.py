@@ -22,8 +22,8 @@ from collections.abc import Iterable
 import numpy as np
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum.marginal_value import Layers
 from paramimic.curriculum.skill import new_curriculum
+from paramimic.rl.numpy_mlp import Layers
 from services.keys import SAMPLES_LIMIT, RunKeys
 from services.store import add_event, connect
 
