@@ -80,7 +80,12 @@ class SkillConfig(Section):
 class EnvConfig(Section):
     """Simulation, observation, reward and termination of ParamEnv."""
 
-    physics_hz: int = Field(600, ge=30, description="physics rate ([WL19] Table 2: 600 Hz)")
+    physics_hz: int | None = Field(
+        None,
+        ge=30,
+        description="physics rate (Hz); default: the character's (its registration, chosen by "
+        "benchmarks/physics_rate.py; [WL19] Table 2 used 600 Hz)",
+    )
     control_hz: int = Field(30, ge=1, description="policy rate ([WL19] Table 2: 30 Hz)")
     frame_skip: int | None = Field(
         None, ge=1, description="physics steps per control step: physics_hz / control_hz"
@@ -111,6 +116,10 @@ class EnvConfig(Section):
 
     @model_validator(mode="after")
     def _rates(self) -> EnvConfig:
+        if self.physics_hz is None and self.frame_skip is not None:  # configs before physics_hz
+            object.__setattr__(self, "physics_hz", self.frame_skip * self.control_hz)
+        if self.physics_hz is None:
+            return self  # the character's rate, set with the character
         if self.physics_hz % self.control_hz:
             raise ValueError(
                 f"physics_hz ({self.physics_hz}) must be a multiple of control_hz "
@@ -125,6 +134,10 @@ class EnvConfig(Section):
                 "set physics_hz and control_hz instead"
             )
         return self
+
+    def with_rate(self, physics_hz: int) -> EnvConfig:
+        """This section with `physics_hz` (and its frame_skip) filled in, validated."""
+        return EnvConfig.model_validate(self.model_dump() | {"physics_hz": physics_hz})
 
 
 class PPOConfig(Section):
@@ -290,6 +303,13 @@ class ExperimentConfig(Section):
         if v not in known:
             raise ValueError(f"unknown character {v!r}; known: {sorted(known)}")
         return v
+
+    @model_validator(mode="after")
+    def _physics_rate(self) -> ExperimentConfig:
+        if self.env.physics_hz is None:
+            hz = _registry().registration(self.character).physics_hz
+            object.__setattr__(self, "env", self.env.with_rate(hz))
+        return self
 
     @model_validator(mode="after")
     def _expand_shape_space(self) -> ExperimentConfig:

@@ -53,6 +53,8 @@ def _write(tmp_path, text):
             "must be below density_visited",
         ),
         ("env: {skill: {trace_bins: 1}}", "env.skill.trace_bins", "greater than or equal to 2"),
+        ("env: {physics_hz: 200}", "env", "physics_hz (200) must be a multiple of control_hz"),
+        ("env: {physics_hz: 300, frame_skip: 20}", "env", "frame_skip 20 != physics_hz"),
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):
@@ -65,3 +67,16 @@ def test_bad_configs_name_the_field(tmp_path, text, field, reason):
 def test_unreadable_yaml(tmp_path):
     with pytest.raises(ConfigError, match="cannot read config"):
         load_config(_write(tmp_path, "task: [unclosed"))
+
+
+def test_physics_rate_defaults_to_the_characters_and_old_configs_keep_theirs(tmp_path):
+    from paramimic.characters import registration
+
+    cfg = load_config(_write(tmp_path, "character: quadruped"))
+    assert cfg.env.physics_hz == registration("quadruped").physics_hz
+    assert cfg.env.frame_skip == cfg.env.physics_hz // 30
+    # a config written before physics_hz existed names frame_skip: its rate stays 30 x that
+    old = load_config(_write(tmp_path, "character: quadruped\nenv: {frame_skip: 20}"))
+    assert (old.env.physics_hz, old.env.frame_skip) == (600, 20)
+    chosen = load_config(_write(tmp_path, "character: quadruped\nenv: {physics_hz: 150}"))
+    assert chosen.env.frame_skip == 5

@@ -76,6 +76,8 @@ class Registration:
     # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "config"); every
     # character also gets `paramimic/<Name>-v0` and one env per clip
     envs: Mapping[str, Mapping] = field(default_factory=dict)
+    # the default physics rate (Hz): what benchmarks/physics_rate.py shows the body needs
+    physics_hz: int = 600
 
     @property
     def name(self) -> str:
@@ -98,6 +100,7 @@ class Registration:
             "gait": self.gait is not None,
             "clips": sorted(self.clips),
             "envs": sorted(self.env_specs()),
+            "physics_hz": self.physics_hz,
         }
 
     def env_specs(self) -> dict[str, dict]:

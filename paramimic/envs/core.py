@@ -80,9 +80,10 @@ class EnvCore(gym.Env):
         with the env section of an experiment's config."""
         self.registration = registration(character)
         self.definition = self.registration.character
-        self.config = (
-            config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
-        )
+        config = config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
+        if config.physics_hz is None:  # the character's rate
+            config = config.with_rate(self.registration.physics_hz)
+        self.config = config
         task = dict(task or {})
         shape_names = self.definition.param_names()
         unknown = set(task) - set(shape_names) - self.GOALS
@@ -96,7 +97,7 @@ class EnvCore(gym.Env):
         self._shape_idx = [(n, i) for i, n in enumerate(names) if n in shape_names]
         self._task = self.task_space.center.copy()
         self.frame_skip = self.config.frame_skip
-        self._timestep = 1.0 / self.config.physics_hz
+        self._timestep = 1.0 / self.config.physics_hz  # the body is compiled at this rate
         self._base = compiled_body(self.definition.name, (), self._timestep)
         self._base_data = mujoco.MjData(self._base.model)
         self.character: Body | None = None

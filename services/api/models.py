@@ -36,6 +36,7 @@ class CharacterInfo(BaseModel):
     gait: bool = Field(description="has a [WL19] reference gait")
     clips: list[str] = Field(description="[L21] clips it can imitate")
     envs: list[str] = Field(description="its gymnasium env ids")
+    physics_hz: int | None = Field(None, description="its default physics rate")
 
 
 class Progress(BaseModel):
