@@ -288,7 +288,8 @@ def add_sensors(
     spec: mujoco.MjSpec, joints: list[str], end_effectors: tuple[str, ...], root: str
 ) -> None:
     """One contiguous sensordata block the environment reads per step, in this order:
-    joint angles [nj], joint velocities [nj], end-effectors in the root frame [3 n_ee],
+    joint angles [nj], joint velocities [nj], end-effectors in the root's inertial frame
+    (FRAMEPOS with a body reference) [3 n_ee],
     actuator torques [nj], root z axis [3], whole-body COM [3]. Actuators are named as joints."""
     obj = mujoco.mjtObj
     kinds = mujoco.mjtSensor
