@@ -42,6 +42,8 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/sampler.py
 	$(BIN)/python benchmarks/scaling.py
 	$(BIN)/python benchmarks/normalization.py all
+	$(BIN)/python benchmarks/reset_cost.py
+	$(BIN)/python benchmarks/physics_rate.py speed fidelity divergence
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
