@@ -44,8 +44,9 @@ def _layout(model: mujoco.MjModel) -> tuple[int, ...]:
 
 def reusable_data(model: mujoco.MjModel, data: mujoco.MjData | None) -> mujoco.MjData:
     """`data` reset for `model` when it was made for a model of the same sizes (another shape of
-    the same body: mjData holds no pointer to its model, and allocating one costs more than
-    the rest of a reset), else a new MjData."""
+    the same body), else a new MjData. MuJoCo's mjData holds no pointer to its model (the Python
+    object's `.model` keeps the first one, read here only for its sizes), and allocating one
+    costs more than the rest of a reset; stepping reused data is bit-identical."""
     if data is not None and _layout(data.model) == _layout(model):
         mujoco.mj_resetData(model, data)
         return data
