@@ -271,7 +271,18 @@ class TrainConfig(Section):
     seed: int = 0
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
     run_dir: Path | None = Field(None, description="default: runs/<config name>")
-    torch_threads: int = Field(1, ge=1, description="torch intra-op threads in the learner")
+    torch_threads: int | Literal["auto"] = Field(
+        "auto",
+        description="torch intra-op threads of the learner's update; auto: every core with "
+        "--serial (nothing else runs then), 1 on Ray (the rollout actors use the cores)",
+    )
+
+    @field_validator("torch_threads")
+    @classmethod
+    def _positive_threads(cls, v: int | str) -> int | str:
+        if v != "auto" and v < 1:
+            raise ValueError("torch_threads must be >= 1 or 'auto'")
+        return v
 
 
 class ExperimentConfig(Section):

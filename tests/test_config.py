@@ -54,6 +54,7 @@ def _write(tmp_path, text):
         ),
         ("env: {skill: {trace_bins: 1}}", "env.skill.trace_bins", "greater than or equal to 2"),
         ("env: {physics_hz: 200}", "env", "physics_hz (200) must be a multiple of control_hz"),
+        ("train: {torch_threads: 0}", "train.torch_threads", "must be >= 1 or 'auto'"),
         ("env: {physics_hz: 300, frame_skip: 20}", "env", "frame_skip 20 != physics_hz"),
     ],
 )

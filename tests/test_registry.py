@@ -90,3 +90,19 @@ def test_registering_twice_or_a_wrong_gait_is_refused():
         register(Registration(wrong, gait=gait(("ankle", "hip"), 1.0, {})))
     with pytest.raises(ValueError, match="unknown character 'toy_missing'.*known"):
         ExperimentConfig.model_validate({"character": "toy_missing"})
+
+
+def test_a_serial_trainer_updates_on_every_core(tmp_path):
+    import os
+
+    import torch
+
+    cfg = ExperimentConfig.model_validate(
+        {"character": "hopper", "task": {"leg_length": [0.8, 1.2]}}
+    )
+    assert cfg.train.torch_threads == "auto"
+    Trainer(cfg, tmp_path)
+    assert torch.get_num_threads() == (os.cpu_count() or 1)
+    Trainer(cfg.model_copy(update={"train": cfg.train.model_copy(update={"torch_threads": 1})}),
+            tmp_path)  # fmt: skip
+    assert torch.get_num_threads() == 1

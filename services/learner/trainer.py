@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -114,6 +115,10 @@ class Progress:
 
 
 class Trainer:
+    """The learner. `curriculum` is the sampler actor's client when the rollouts run on Ray
+    (then `train.torch_threads: auto` is one thread: the actors use the cores); without it the
+    trainer runs its own curriculum and, with `--serial`, has the machine to itself."""
+
     def __init__(
         self, cfg: ExperimentConfig, run_dir: Path, curriculum: Curriculum | None = None
     ) -> None:
@@ -123,7 +128,11 @@ class Trainer:
         self.space: TaskSpace = probe.task_space
         self.obs_dim = probe.observation_space.shape[0]
         self.act_dim = probe.action_space.shape[0]
-        torch.set_num_threads(cfg.train.torch_threads)
+        # a serial trainer has the machine to itself; on Ray the actors use the cores
+        threads = cfg.train.torch_threads
+        if threads == "auto":
+            threads = 1 if curriculum is not None else (os.cpu_count() or 1)
+        torch.set_num_threads(threads)
         seed = cfg.train.seed
         self.learner = PPOLearner(self.obs_dim, self.act_dim, cfg.ppo, seed=seed)
         cc = cfg.curriculum
