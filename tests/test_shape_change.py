@@ -82,3 +82,27 @@ def test_set_shape_rejects_parameters_outside_the_task():
         env.set_shape({"torso_length": 1.1})
     with pytest.raises(ValueError, match="positive"):
         env.set_shape({"global_scale": -1.0})
+
+
+def test_the_skill_env_changes_shape_on_the_fly_too():
+    """set_shape lives in the env core: the [L21] env keeps its state, its gravity and its
+    motion m_a (tabulated again on the new body)."""
+    from paramimic.envs import SkillEnv
+
+    env = SkillEnv(
+        "humanoid",
+        {"gravity": (0.5, 0.5), "leg_length": (0.8, 1.2)},
+        {"clip": "humanoid_walk", "init_noise": 0.0},
+    )
+    env.reset(seed=0, options={"task": {"gravity": 0.5, "leg_length": 0.9}})
+    for _ in range(3):
+        env.step(np.zeros(env.action_space.shape))
+    joints = env.data.qpos[env.character.qpos_idx].copy()
+    phi = env._phi
+    obs = env.set_shape({"leg_length": 1.1})
+    assert env.character.shape["leg_length"] == 1.1 and env.task[1] == 1.1
+    np.testing.assert_array_equal(env.data.qpos[env.character.qpos_idx], joints)
+    assert env._phi == phi and env.model.opt.gravity[2] == pytest.approx(-0.5 * 9.81)
+    assert env.observation_space.contains(obs)
+    _, _, terminated, _, info = env.step(np.zeros(env.action_space.shape))
+    assert not info["diverged"]

@@ -410,7 +410,7 @@ class SkillEnv(EnvCore):
         g = G * (a[self._gravity_idx] if self._gravity_idx is not None else 1.0)
         self.model.opt.gravity[:] = (0.0, 0.0, -g)
 
-    def _shape_changed(self, old: mujoco.MjData, body_before: Body) -> None:
+    def _shape_changed(self, com_before: np.ndarray) -> None:
         """m_a is tabulated again on the new body, under the episode's gravity."""
         self._set_gravity()
         self._set_motion(self._trace)
