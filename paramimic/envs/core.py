@@ -9,6 +9,7 @@ observation, reward and termination.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from functools import cache, lru_cache
 from typing import Any
@@ -67,7 +68,7 @@ def compiled_body(
     return _reshaper(character)(dict(shape), timestep)
 
 
-class EnvCore(gym.Env):
+class EnvCore(gym.Env, ABC):
     metadata = {"render_modes": [], "render_fps": 30}
     GOALS: frozenset[str] = frozenset()  # task parameters besides the shape this env reads
 
@@ -105,9 +106,9 @@ class EnvCore(gym.Env):
         self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
         self._setup()
 
+    @abstractmethod
     def _setup(self) -> None:
         """The subclass's own set-up: reference motion, spaces, reward weights."""
-        raise NotImplementedError
 
     def goal_index(self, name: str) -> int | None:
         """The task dimension of a goal or condition, None when the task space has none."""
@@ -243,8 +244,9 @@ class EnvCore(gym.Env):
         """What a subclass carries over to the new body after `set_shape` (the whole-body COM
         before the change [3] given)."""
 
+    @abstractmethod
     def _observe(self) -> np.ndarray:
-        raise NotImplementedError
+        """The observation of the current state [obs_dim] (float32)."""
 
     # --- accessors ------------------------------------------------------------------------------
 
