@@ -178,6 +178,14 @@ class ParamEnv(EnvCore):
         self._watch_stability()
         self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
         self._com_vel = (0.0, 0.0, 0.0)
+        self._look_ahead()
+
+    def _look_ahead(self) -> None:
+        """The reference at the next control step's phase: observed now, the PD target and
+        the imitation reward of the next step (one lookup per step)."""
+        self._ref_next = (
+            self._reference_at(self._phase + self._dphase) if self._reference is not None else None
+        )
 
     def _set_targets(self) -> None:
         """Target speed and direction of the task, normalized for the body ([WL19] Table 1)."""
@@ -204,6 +212,7 @@ class ParamEnv(EnvCore):
         self._set_targets()
         shift = self.data.sensordata[self.character.com_sensor] - com_before
         self._com = [tuple((np.array(p) + shift).tolist()) for p in self._com]
+        self._look_ahead()  # the reference table is the new body's
 
     # --- step ---------------------------------------------------------------------------------
 
@@ -212,9 +221,8 @@ class ParamEnv(EnvCore):
         self._phase += self._dphase
         # PD target = reference pose + offset; MuJoCo clamps ctrl to the joint range.
         a = np.minimum(np.maximum(action, -1.0), 1.0) * self._action_scale
-        ref = None
-        if self._reference is not None:
-            ref = self._reference_at(self._phase)
+        ref = self._ref_next  # the reference at this phase
+        if ref is not None:
             a += ref[: self._nj]
         d.ctrl[:] = a
         mujoco.mj_step(self.model, d, nstep=self.frame_skip)
@@ -224,6 +232,7 @@ class ParamEnv(EnvCore):
         if self.diverging():
             return self._diverged()
         reward, terms = self._reward(ref)
+        self._look_ahead()
         obs = self._observe()
         self._last_obs = obs
         height = d.qpos[self._height_adr] + self._height_offset
@@ -328,8 +337,7 @@ class ParamEnv(EnvCore):
         if self._reference is not None:
             x = 2.0 * math.pi * self._phase
             parts.append((math.sin(x), math.cos(x)))
-            nxt = self._reference_at(self._phase + self._dphase)
-            parts.append(nxt[: self._nj])  # next reference pose
+            parts.append(self._ref_next[: self._nj])  # next reference pose
         return np.concatenate(parts, dtype=np.float32)
 
     @property
