@@ -37,14 +37,21 @@ class Section(BaseModel):
 
 
 class RewardConfig(Section):
-    """[WL19] Eq. 4-7 with Table 3 (biped lower body) weights and the common sensitivities."""
+    """[WL19] Eq. 4-7: the weights w1..w6 default to the character's row of Table 3
+    (`Registration.reward_weights`); the sensitivities σ1..σ6 are the paper's for all bodies."""
 
-    w_pose: float = Field(5.0, ge=0, description="w1, joint angle imitation")
-    w_velocity: float = Field(2.0, ge=0, description="w2, joint velocity imitation")
-    w_end_effector: float = Field(2.0, ge=0, description="w3, per end-effector position imitation")
-    w_com_velocity: float = Field(1.0, ge=0, description="w4, average COM velocity vs target")
-    w_direction: float = Field(1.0, ge=0, description="w5, facing direction vs target direction")
-    w_torque: float = Field(1.0, ge=0, description="w6, joint torque regularizer")
+    w_pose: float | None = Field(None, ge=0, description="w1, joint angle imitation")
+    w_velocity: float | None = Field(None, ge=0, description="w2, joint velocity imitation")
+    w_end_effector: float | None = Field(
+        None, ge=0, description="w3, per end-effector position imitation"
+    )
+    w_com_velocity: float | None = Field(
+        None, ge=0, description="w4, average COM velocity vs target"
+    )
+    w_direction: float | None = Field(
+        None, ge=0, description="w5, facing direction vs target direction"
+    )
+    w_torque: float | None = Field(None, ge=0, description="w6, joint torque regularizer")
     sigma_pose: PositiveFloat = 0.02  # σ1
     sigma_velocity: PositiveFloat = 0.5  # σ2
     sigma_end_effector: PositiveFloat = 0.2  # σ3
@@ -54,6 +61,12 @@ class RewardConfig(Section):
     normalize: bool = Field(
         True, description="scale velocity, direction and energy by the body ([WL19] §4.3)"
     )
+
+    def weights(self, table3: tuple[float, ...]) -> tuple[float, ...]:
+        """w1..w6: the ones set here, the character's [WL19] Table 3 row for the others."""
+        names = ("w_pose", "w_velocity", "w_end_effector", "w_com_velocity", "w_direction")
+        mine = [getattr(self, n) for n in (*names, "w_torque")]
+        return tuple(t if w is None else w for w, t in zip(mine, table3, strict=True))
 
 
 class SkillConfig(Section):
@@ -158,6 +171,16 @@ class PPOConfig(Section):
         (128, 128, 128), description="3 layers of 128 ([WL19] §5)"
     )
     init_log_std: float = Field(-1.0, description="initial log std of the Gaussian policy")
+    learn_std: bool = Field(
+        True,
+        description="false: the policy std stays at exp(init_log_std), as imitation "
+        "controllers keep it (DeepMimic; README 'Families that learn')",
+    )
+    desired_kl: PositiveFloat | None = Field(
+        None,
+        description="adapt the policy learning rate per minibatch to this approx. KL: /1.5 "
+        "above 2x, x1.5 below 1/2 (rsl_rl's rule), within [1e-5, 1e-2]; none: fixed lr",
+    )
     obs_clip: PositiveFloat = Field(10.0, description="clip of normalized observations")
 
     @field_validator("hidden_sizes")

@@ -86,8 +86,8 @@ def test_reward_matches_eq_4_to_7_on_a_known_state():
         + w[4] * t["direction"]
         + w[5] * t["torque"]
     )
-    assert r == pytest.approx(weighted / (5 + 2 + 2 * 3 + 1 + 1 + 1))
-    assert t["task"] == pytest.approx((t["com_velocity"] + t["direction"]) / 16)
+    assert r == pytest.approx(weighted / (5 + 2 + 2 * 2 + 1 + 1 + 1))  # two end effectors
+    assert t["task"] == pytest.approx((t["com_velocity"] + t["direction"]) / 14)
 
 
 def test_pushed_over_body_falls_and_terminates():

@@ -116,9 +116,9 @@ def test_param_env_reward_on_a_state_built_by_hand():
     com = math.exp(-1.0 / (rc.sigma_com_velocity * 2))  # Eq. 6: (0 − 1)² over dim 2
     assert terms["pose"] == pytest.approx(1.0)
     assert terms["velocity"] == pytest.approx(1.0)
-    assert terms["end_effector"] == pytest.approx(3.0)  # three effectors, each bell 1
+    assert terms["end_effector"] == pytest.approx(2.0)  # two feet, each bell 1
     assert terms["torque"] == pytest.approx(torque, rel=1e-6)
     assert terms["direction"] == pytest.approx(1.0)
     assert terms["com_velocity"] == pytest.approx(com)
-    # Eq. 4 with Table 3 weights: (5 + 2 + 3·2 + 1·com + 1·1 + 1·torque) / 16
-    assert reward == pytest.approx((5 + 2 + 6 + com + 1 + torque) / 16, rel=1e-6)
+    # Eq. 4 with Table 3 weights, w3 = 2 per foot: (5 + 2 + 2·2 + 1·com + 1·1 + 1·torque) / 14
+    assert reward == pytest.approx((5 + 2 + 4 + com + 1 + torque) / 14, rel=1e-6)

@@ -340,7 +340,7 @@ def _fish() -> BodyPlan:
     return BodyPlan(
         name="fish",
         parts=tuple(parts),
-        end_effectors=("body0", "body5"),
+        end_effectors=("body5",),  # the tail; not the root (body0)
         swims=True,
         geom="ellipsoid",
     )
@@ -440,5 +440,6 @@ MANTA_GAIT = gait(
 
 BIPED_LOWER_REGISTRATION = Registration(BIPED_LOWER, gait=BIPED_LOWER_GAIT)
 QUADRUPED_REGISTRATION = Registration(QUADRUPED, gait=QUADRUPED_GAIT)
-FISH_REGISTRATION = Registration(FISH, gait=FISH_GAIT)
-MANTA_REGISTRATION = Registration(MANTA, gait=MANTA_GAIT)
+SWIMMER_WEIGHTS = (3.0, 2.0, 4.0, 1.0, 0.5, 0.5)  # [WL19] Table 3, fish and manta ray
+FISH_REGISTRATION = Registration(FISH, gait=FISH_GAIT, reward_weights=SWIMMER_WEIGHTS)
+MANTA_REGISTRATION = Registration(MANTA, gait=MANTA_GAIT, reward_weights=SWIMMER_WEIGHTS)

@@ -260,15 +260,26 @@ def world_spec(name: str, floor: bool = True, light_height: float = 4.0) -> mujo
     return spec
 
 
+ARMATURE = 0.01  # kg m², every hinge, every body size (see `add_hinge`)
+
+
 def add_hinge(body: mujoco.MjsBody, joint: Joint) -> None:
-    """A limited hinge about `joint.axis` (body frame) with a little armature."""
+    """A limited hinge about `joint.axis` (body frame) with a constant armature.
+
+    The armature does not follow the limb's inertia on purpose: it is what keeps the stiff PD
+    servos (whose gains do not scale with the body) stable on light limbs. Scaled as the limb's
+    own inertia (∝ L³w²), biped_lower and the quadruped at their half-size corners diverged
+    under random actions at 600 Hz and could not hold their reference pose
+    (tests/test_assorted_characters.py, tried in Part 9). At half size the armature is a
+    larger share of a limb's inertia than on the base body: small bodies swing their limbs
+    more sluggishly than volume alone would say."""
     body.add_joint(
         name=joint.name,
         type=mujoco.mjtJoint.mjJNT_HINGE,
         axis=list(joint.axis),
         range=list(joint.range),
         limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-        armature=0.01,
+        armature=ARMATURE,
     )
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from paramimic.characters.body import (
+    ARMATURE,
     Body,
     Joint,
     ShapeParam,
@@ -163,7 +164,7 @@ class HumanoidDef:
                         name=f"{name}_{axis}",
                         type=mujoco.mjtJoint.mjJNT_HINGE,
                         axis=[float(axis == a) for a in AXES],
-                        armature=0.01,
+                        armature=ARMATURE,
                     )
             elif j["Type"] == "revolute":
                 body.add_joint(
@@ -172,7 +173,7 @@ class HumanoidDef:
                     axis=[0, 0, 1],
                     range=[j["LimLow0"], j["LimHigh0"]],
                     limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                    armature=0.01,
+                    armature=ARMATURE,
                 )
             kind = _GEOM_TYPES[shapes[name]["Shape"]]
             body.add_geom(name=name, type=kind, **dims.geoms[name], **common)
@@ -275,5 +276,7 @@ def humanoid_clip(name: str) -> Clip:
 
 
 HUMANOID_REGISTRATION = Registration(
-    HUMANOID, clips={f"humanoid_{name}": partial(humanoid_clip, name) for name in CLIPS}
+    HUMANOID,
+    clips={f"humanoid_{name}": partial(humanoid_clip, name) for name in CLIPS},
+    reward_weights=(4.0, 1.0, 2.0, 1.0, 2.0, 1.0),  # [WL19] Table 3, biped (full)
 )

@@ -83,7 +83,7 @@ WALKER = CharacterDef(
     ),
     scales=_walker_scales,
     legs=(("thigh_r", "shin_r"), ("thigh_l", "shin_l")),
-    end_effectors=("foot_r", "foot_l", "torso"),
+    end_effectors=("foot_r", "foot_l"),  # not the root (torso): in its own frame, constant
     feet=("foot_r", "foot_l"),
 )
 
@@ -99,7 +99,7 @@ HOPPER = CharacterDef(
     ),
     scales=_hopper_scales,
     legs=(("thigh", "shin"),),
-    end_effectors=("foot", "torso"),
+    end_effectors=("foot",),
     feet=("foot",),
 )
 

@@ -78,6 +78,9 @@ class Registration:
     envs: Mapping[str, Mapping] = field(default_factory=dict)
     # the default physics rate (Hz): what benchmarks/physics_rate.py shows the body needs
     physics_hz: int = 600
+    # [WL19] Table 3, w1..w6 of Eq. 4-7 (pose, joint velocity, end effector, COM velocity,
+    # direction, torque): the biped-lower row unless the paper gives the body its own
+    reward_weights: tuple[float, float, float, float, float, float] = (5.0, 2.0, 2.0, 1.0, 1.0, 1.0)
 
     @property
     def name(self) -> str:
@@ -101,6 +104,7 @@ class Registration:
             "clips": sorted(self.clips),
             "envs": sorted(self.env_specs()),
             "physics_hz": self.physics_hz,
+            "reward_weights": list(self.reward_weights),
         }
 
     def env_specs(self) -> dict[str, dict]:

@@ -4,8 +4,9 @@ Each episode draws task parameters a from the task space (or takes `options={"ta
 builds the body F(B̄, b) for the shape part of a, and imitates the character's reference motion
 while meeting the task goals. Observation, action and reward follow [WL19] §3.2:
 - observation: a, joint positions and velocities, root height, up vector and velocity,
-  end-effectors in the root frame, target and average COM velocity, and with a reference motion
-  the phase (sin, cos) and the next reference pose;
+  end-effectors in the root frame, target and average COM velocity in the heading frame, and
+  with a reference motion the phase (sin, cos) and the reference poses of the next control step
+  and 0.5 s and 1.0 s ahead;
 - action: an offset added to the reference pose, the PD target of the stable PD servos;
 - reward: Eq. 4-7, every term a bell, scaled by 1/Σw into (0, 1].
 """
@@ -34,6 +35,7 @@ from paramimic.envs.rewards import (
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+FUTURE_POSES = (0.5, 1.0)  # s: reference postures observed ahead ([WL19] §4.1)
 REWARD_TERMS = ("pose", "velocity", "end_effector", "com_velocity", "direction", "torque", "task")
 
 
@@ -76,12 +78,7 @@ class ParamEnv(EnvCore):
         self._dq = slice(nj, 2 * nj)
         self._ee = slice(2 * nj, 2 * nj + 3 * n_ee)
         self._weights = wl19_weights(
-            rc.w_pose,
-            rc.w_velocity,
-            rc.w_end_effector,
-            rc.w_com_velocity,
-            rc.w_direction,
-            rc.w_torque,
+            *rc.weights(self.registration.reward_weights),
             n_ee,
             imitation=self.motion is not None,
         )
@@ -89,9 +86,8 @@ class ParamEnv(EnvCore):
         # (x, z) for planar bodies, all of x, y, z for free ones
         axes = [0, 1, 2] if self._free else [0, 2]
         ee = np.arange(base.ee_sensor.start, base.ee_sensor.stop).reshape(n_ee, 3)[:, axes]
-        up = base.up_sensor.start + np.array(axes)
-        self._obs_sensors = np.concatenate([np.arange(2 * nj), ee.ravel(), up])
-        self._root_velocity = slice(0, 6) if self._free else slice(0, 3)
+        self._up = base.up_sensor.start + np.array(axes)
+        self._obs_sensors = np.concatenate([np.arange(2 * nj), ee.ravel()])
         self._zero_reference = np.zeros(2 * nj + 3 * n_ee)
 
     def _bind(self, body: Body) -> None:
@@ -102,7 +98,6 @@ class ParamEnv(EnvCore):
         self._flags_stepping = body.model.opt.disableflags
         self._opt = body.model.opt
         self._height_offset = 0.0 if self._free else body.hip_height
-        self._fall_height = self.config.fall_height_ratio * body.hip_height
         base = self._base
         self._scales = (
             reward_scales(body.leg_lengths, base.leg_lengths, body.mass, base.mass)
@@ -171,6 +166,7 @@ class ParamEnv(EnvCore):
         if len(c.contact_site_ids):
             d.qpos[:] = self.ground_posture(d.qpos.copy())
             d.qpos[self._height_adr] += 1e-3
+        self._stand(self.root_height())  # (after the fit: its standing height in this pose)
         d.ctrl[:] = d.qpos[c.qpos_idx]
         mujoco.mj_forward(m, d)
         self._sense()
@@ -179,6 +175,19 @@ class ParamEnv(EnvCore):
         self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
         self._com_vel = (0.0, 0.0, 0.0)
         self._look_ahead()
+
+    def root_height(self) -> float:
+        """The root's height above the ground (m)."""
+        return float(self.data.qpos[self._height_adr] + self._height_offset)
+
+    def _stand(self, height: float) -> None:
+        """The fall rule: a fall is the root below `fall_height_ratio` of `height`, the body's
+        own standing height, i.e. its root height placed on the ground by [WL19] Eq. 1 in its
+        reference pose at the episode's start. Not the straight legs' hip height: a body with
+        legs 0.7/1.3 stands on its short leg (and the base body stands with bent knees), so a
+        threshold from the longest leg would count bodies as fallen that stand."""
+        self._standing = (height, self.character.hip_height)
+        self._fall_height = self.config.fall_height_ratio * height
 
     def _look_ahead(self) -> None:
         """The reference at the next control step's phase: observed now, the PD target and
@@ -212,6 +221,8 @@ class ParamEnv(EnvCore):
         self._set_targets()
         shift = self.data.sensordata[self.character.com_sensor] - com_before
         self._com = [tuple((np.array(p) + shift).tolist()) for p in self._com]
+        height, hip = self._standing  # the new body stands as much higher as its legs are
+        self._stand(height * self.character.hip_height / hip)
         self._look_ahead()  # the reference table is the new body's
 
     # --- step ---------------------------------------------------------------------------------
@@ -235,9 +246,8 @@ class ParamEnv(EnvCore):
         self._look_ahead()
         obs = self._observe()
         self._last_obs = obs
-        height = d.qpos[self._height_adr] + self._height_offset
         tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
-        fell = not self.definition.swims and bool(height < self._fall_height or tilted)
+        fell = not self.definition.swims and bool(self.root_height() < self._fall_height or tilted)
         truncated = self._steps >= self._max_steps and not fell
         info = {
             "task": self._task.copy(),
@@ -322,22 +332,43 @@ class ParamEnv(EnvCore):
         return reward, reported
 
     def _observe(self) -> np.ndarray:
+        """[WL19] §4.1: s = (b, (q, q̇, e_1..e_K), s_s), with the sensory state s_s: the
+        reference postures 0.0, 0.5 and 1.0 s ahead and the target and average COM velocity
+        in the root's heading frame. Free bodies see the world's horizontal directions (up
+        vector, root velocity, target direction, COM velocity) in the heading frame: turning
+        the whole scene about the vertical leaves the observation unchanged."""
         c, d = self.character, self.data
-        vx, _, vz = self._com_vel
-        height = d.qpos[self._height_adr] + self._height_offset
-        parts = [
-            self._task,
-            d.sensordata[self._obs_sensors],  # joint q, dq, end-effectors, up vector
-            d.qvel[self._root_velocity],  # root velocity (planar: x, z, pitch rate)
-            (height, self._target_v, vx, vz),  # root height, target speed, average COM vel.
-        ]
-        if self._free:  # heading: the root's x axis, the target direction, COM velocity y
+        vx, vy, vz = self._com_vel
+        parts = [self._task, d.sensordata[self._obs_sensors]]  # joints, end-effectors
+        if self._free:  # the heading frame: the root's x axis projected on the ground
             xmat = d.xmat[c.root_body_id]
-            parts.append((xmat[0], xmat[3], xmat[6], *self._target_dir, self._com_vel[1]))
+            hx, hy = xmat[0], xmat[3]
+            norm = math.hypot(hx, hy) or 1.0
+            hx, hy = hx / norm, hy / norm
+
+            def heading(x: float, y: float) -> tuple[float, float]:
+                return hx * x + hy * y, hx * y - hy * x
+
+            up = d.sensordata[c.up_sensor]
+            root_v = d.qvel[0:3]
+            tx, ty = heading(*self._target_dir)
+            vx, vy = heading(vx, vy)
+            parts += [
+                (*heading(up[0], up[1]), up[2]),
+                (*heading(root_v[0], root_v[1]), root_v[2]),
+                d.qvel[3:6],  # angular velocity: the free joint's is in the root's frame
+                (xmat[6], tx, ty, vy),
+            ]
+        else:  # planar: the sagittal plane is the heading frame
+            parts += [d.sensordata[self._up], d.qvel[0:3]]  # up (x, z); root x, z, pitch rate
+        parts.append((self.root_height(), self._target_v, vx, vz))
         if self._reference is not None:
             x = 2.0 * math.pi * self._phase
             parts.append((math.sin(x), math.cos(x)))
-            parts.append(self._ref_next[: self._nj])  # next reference pose
+            parts.append(self._ref_next[: self._nj])  # the next control step's reference pose
+            period = self.motion.period
+            for ahead in FUTURE_POSES:
+                parts.append(self._reference_at(self._phase + ahead / period)[: self._nj])
         return np.concatenate(parts, dtype=np.float32)
 
     @property

@@ -62,6 +62,9 @@ class Batch:
     tasks: np.ndarray  # [N, d] task parameters of each transition (for V̄)
 
 
+LR_MIN, LR_MAX = 1e-5, 1e-2  # bounds of the adaptive policy learning rate
+
+
 class PPOLearner:
     """Networks, optimizers and the observation normalizer; `update` runs one PPO step."""
 
@@ -71,7 +74,9 @@ class PPOLearner:
         self.policy = ActorCritic(
             obs_dim, act_dim, cfg.hidden_sizes, cfg.init_log_std, cfg.obs_clip
         )
-        self.policy_opt = torch.optim.Adam(self.policy.policy_parameters(), lr=cfg.policy_lr)
+        self.policy.log_std.requires_grad_(cfg.learn_std)
+        trained = [p for p in self.policy.policy_parameters() if p.requires_grad]
+        self.policy_opt = torch.optim.Adam(trained, lr=cfg.policy_lr)
         self.value_opt = torch.optim.Adam(self.policy.value_parameters(), lr=cfg.value_lr)
         self.normalizer = RunningMeanStd(obs_dim)
         self.rng = np.random.default_rng(seed)
@@ -145,6 +150,8 @@ class PPOLearner:
                     cfg.vf_coef,
                     cfg.ent_coef,
                 )
+                if cfg.desired_kl is not None:
+                    self._adapt_lr(stats["approx_kl"], cfg.desired_kl)
                 self.policy_opt.zero_grad()
                 self.value_opt.zero_grad()
                 loss.backward()
@@ -164,7 +171,19 @@ class PPOLearner:
             float(1 - np.var(batch.returns - batch.values) / var_y) if var_y > 0 else 0.0
         )
         metrics["std"] = float(self.policy.log_std.detach().exp().mean())
+        metrics["policy_lr"] = float(self.policy_opt.param_groups[0]["lr"])
         return metrics
+
+    def _adapt_lr(self, kl: float, desired: float) -> None:
+        """The adaptive step size of rsl_rl / legged_gym PPO: a minibatch whose policy already
+        moved more than 2x `desired` (approx. KL to the sampling policy) shrinks the learning
+        rate by 1.5, one below half of it grows it by 1.5. It lives in the optimizer's state,
+        so a checkpoint keeps it."""
+        for group in self.policy_opt.param_groups:
+            if kl > 2.0 * desired:
+                group["lr"] = max(LR_MIN, group["lr"] / 1.5)
+            elif kl < 0.5 * desired:
+                group["lr"] = min(LR_MAX, group["lr"] * 1.5)
 
     def state_dict(self) -> dict:
         return {

@@ -1,0 +1,216 @@
+"""Families that learn (Part 9): what makes one controller work on most bodies of walker_legs.
+
+Each variant is a set of config overrides on configs/walker_legs.yaml, trained with the serial
+trainer (one torch thread, so two runs share the 2 cores) and evaluated with the deterministic
+policy on 300 shapes drawn with a seed no training run uses (EVAL_SEED) plus a 7x7 grid of the
+two leg lengths, 10 s episodes. Runs are resumable: `run` continues from the run dir's latest
+checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most 10 iterations.
+
+    python benchmarks/family_study.py run std_frozen --seed 0 --steps 2000000
+    python benchmarks/family_study.py queue std_frozen,kl_adaptive --seeds 0 --steps 2000000
+    python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
+
+Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
+the training curve); `merge` writes study.json: per variant and budget, mean and spread over
+seeds of falls, mean return, worst-decile return, forward speed and the final policy std.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+RUNS = ROOT / "runs" / "study"
+EVAL_SEED = 2024  # never a training seed
+EVAL_EPISODES = 300
+CONFIG = "configs/walker_legs.yaml"
+FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
+TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128}
+VARIANTS: dict[str, dict] = {
+    # the config as shipped (every Part 9 rule fix included)
+    "shipped": {},
+    "k0": {"curriculum.k": 0.0},
+    "std_frozen": FROZEN,
+    "std_frozen_k0": FROZEN | {"curriculum.k": 0.0},
+    "kl_adaptive": {"ppo.desired_kl": 0.01},
+    "std_frozen_kl_adaptive": FROZEN | {"ppo.desired_kl": 0.01},
+    "table2_steps": TABLE2,
+    "std_frozen_table2": FROZEN | TABLE2,
+}
+
+
+def _report_path(variant: str, seed: int, steps: int) -> Path:
+    return RESULTS / f"study_{variant}_s{seed}_{steps / 1e6:g}M.json"
+
+
+def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
+    """Train (or continue) one variant and seed to `steps` env steps, then evaluate."""
+    warnings.filterwarnings("ignore")
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, evaluate
+    from services.learner import checkpoint
+    from services.learner.trainer import SerialBackend, Trainer
+
+    run_dir = RUNS / f"{variant}_s{seed}"
+    overrides = VARIANTS[variant] | {
+        "train.run_dir": str(run_dir),
+        "train.seed": seed,
+        "train.torch_threads": 1,
+    }
+    cfg = load_config(ROOT / config, overrides)
+    trainer = Trainer(cfg, run_dir)
+    latest = checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST
+    if latest.exists():
+        trainer.load_state_dict(checkpoint.load(latest))
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    t0 = time.perf_counter()
+    trainer.train(backend, steps)
+    backend.close()
+    env_cfg = cfg.env.model_copy(update={"max_episode_seconds": 10.0})
+    report = evaluate(
+        deterministic(trainer.learner.policy),
+        lambda: make_env(cfg.character, cfg.task, env_cfg),
+        trainer.space,
+        EVAL_EPISODES,
+        EVAL_SEED,
+        cfg.grid_dims(),
+        7,
+    )
+    curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    keep = ("env_steps", "mean_return", "fall_percent", "std", "approx_kl", "policy_lr")
+    report |= {
+        "variant": variant,
+        "overrides": VARIANTS[variant],
+        "config": config,
+        "seed": seed,
+        "env_steps": trainer.progress.env_steps,
+        "seconds_this_session": time.perf_counter() - t0,
+        "final_std": float(np.exp(trainer.learner.policy.log_std.detach().numpy()).mean()),
+        "curve": [{k: m[k] for k in keep if k in m} for m in curve],
+    }
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    _report_path(variant, seed, steps).write_text(json.dumps(report, indent=2))
+    return report
+
+
+def _spread(values: list[float]) -> dict:
+    a = np.array(values, dtype=float)
+    return {"mean": float(a.mean()), "min": float(a.min()), "max": float(a.max()), "n": len(a)}
+
+
+def merge() -> dict:
+    groups: dict[tuple[str, float], list[dict]] = {}
+    for path in sorted(RESULTS.glob("study_*_s*_*M.json")):
+        r = json.loads(path.read_text())
+        groups.setdefault((r["variant"], round(r["env_steps"] / 1e6)), []).append(r)
+    table = {}
+    for (variant, millions), runs in sorted(groups.items()):
+        table[f"{variant}@{millions}M"] = {
+            "seeds": [r["seed"] for r in runs],
+            "overrides": runs[0]["overrides"],
+            "fall_percent": _spread([r["fall_percent"] for r in runs]),
+            "mean_return": _spread([r["mean_return"] for r in runs]),
+            "worst_decile_return": _spread([r["worst_decile_return"] for r in runs]),
+            "worst_decile_over_mean": _spread(
+                [r["worst_decile_return"] / max(r["mean_return"], 1e-9) for r in runs]
+            ),
+            "forward_speed": _spread([r["mean_forward_speed"] for r in runs]),
+            "final_std": _spread([r["final_std"] for r in runs]),
+            "grid_fall_percent": _spread(
+                [100 * float(np.mean(r["grid"]["fall"])) for r in runs if "grid" in r]
+            ),
+        }
+    (RESULTS / "study.json").write_text(json.dumps(table, indent=2))
+    _plot(groups)
+    for name, row in table.items():
+        f, w = row["fall_percent"], row["worst_decile_return"]
+        print(
+            f"{name:34s} seeds {row['seeds']}  falls {f['mean']:5.1f} % [{f['min']:.1f}-"
+            f"{f['max']:.1f}]  return {row['mean_return']['mean']:6.1f}  worst decile "
+            f"{w['mean']:5.1f}  speed {row['forward_speed']['mean']:.2f}  "
+            f"std {row['final_std']['mean']:.2f}"
+        )
+    return table
+
+
+def _plot(groups: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    variants = sorted({v for v, _ in groups})
+    for i, variant in enumerate(variants):
+        runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
+        for j, r in enumerate(runs):
+            x = [m["env_steps"] / 1e6 for m in r["curve"]]
+            for ax, key in zip(axes, ("fall_percent", "mean_return", "std"), strict=True):
+                y = [m.get(key, np.nan) for m in r["curve"]]
+                if key != "std":  # training episodes are noisy: a moving average of 10
+                    y = np.convolve(y, np.ones(10) / 10, mode="same")
+                ax.plot(x, y, color=colors[i % len(colors)], alpha=0.8,
+                        label=variant if j == 0 else None)  # fmt: skip
+    for ax, title in zip(
+        axes, ("training falls (%)", "training return", "policy std"), strict=True
+    ):
+        ax.set_title(title)
+        ax.set_xlabel("env steps (M)")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("walker_legs (each leg 0.7-1.3x): training curves per variant and seed")
+    fig.tight_layout()
+    fig.savefig(RESULTS / "study_curves.png", dpi=90)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("command", choices=["run", "queue", "merge"])
+    ap.add_argument("variants", nargs="?", default="shipped", help="comma-separated")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
+    ap.add_argument("--steps", type=int, default=2_000_000)
+    ap.add_argument("--parallel", type=int, default=2)
+    args = ap.parse_args()
+    for v in args.variants.split(","):
+        if v not in VARIANTS:
+            raise SystemExit(f"unknown variant {v!r}; variants: {sorted(VARIANTS)}")
+    if args.command == "merge":
+        merge()
+    elif args.command == "run":
+        r = run(args.variants, args.seed, args.steps)
+        print(f"{args.variants} s{args.seed}: falls {r['fall_percent']:.1f} %")
+    else:  # every (variant, seed) without a report at this budget, `parallel` at a time
+        jobs = [
+            (v, int(s))
+            for s in args.seeds.split(",")
+            for v in args.variants.split(",")
+            if not _report_path(v, int(s), args.steps).exists()
+        ]
+
+        def sub(job: tuple[str, int]) -> int:
+            v, s = job
+            cmd = [sys.executable, __file__, "run", v, "--seed", str(s), "--steps", str(args.steps)]
+            return subprocess.call(cmd)
+
+        with ThreadPoolExecutor(args.parallel) as pool:
+            codes = list(pool.map(sub, jobs))
+        merge()
+        if any(codes):
+            raise SystemExit(f"{sum(1 for c in codes if c)} runs failed")
+
+
+if __name__ == "__main__":
+    main()
