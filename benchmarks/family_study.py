@@ -47,6 +47,13 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_kl_adaptive": FROZEN | {"ppo.desired_kl": 0.01},
     "table2_steps": TABLE2,
     "std_frozen_table2": FROZEN | TABLE2,
+    # the base body alone (legs fixed at 1.0, the family's env layout): the warm start's source
+    "base_legs": FROZEN | {"task.left_leg_length": [1.0, 1.0], "task.right_leg_length": [1.0, 1.0]},
+    # the family from the base body's controller (run base_legs with the same seed first)
+    "warm_std_frozen": FROZEN | {"train.init_from": "runs/study/base_legs_s{seed}"},
+    "std_0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)},
+    "std_frozen_gamma99": FROZEN | {"ppo.gamma": 0.99},
+    "std_frozen_batch16k": FROZEN | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},
 }
 
 
@@ -64,12 +71,17 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
     from services.learner.trainer import SerialBackend, Trainer
 
     run_dir = RUNS / f"{variant}_s{seed}"
-    overrides = VARIANTS[variant] | {
+    variant_overrides = {
+        k: ROOT / v.format(seed=seed) if k == "train.init_from" else v
+        for k, v in VARIANTS[variant].items()
+    }
+    overrides = variant_overrides | {
         "train.run_dir": str(run_dir),
         "train.seed": seed,
         "train.torch_threads": 1,
     }
     cfg = load_config(ROOT / config, overrides)
+    run_dir.mkdir(parents=True, exist_ok=True)
     trainer = Trainer(cfg, run_dir)
     latest = checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST
     if latest.exists():

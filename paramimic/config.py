@@ -294,6 +294,12 @@ class TrainConfig(Section):
     seed: int = 0
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
     run_dir: Path | None = Field(None, description="default: runs/<config name>")
+    init_from: Path | None = Field(
+        None,
+        description="warm start: the policy, value and normalizer of this checkpoint (a run dir "
+        "or .pt) of the same env layout, e.g. the base body's controller for its family; task "
+        "dims that were fixed there and are ranges here start ignored (`widen_task_inputs`)",
+    )
     torch_threads: int | Literal["auto"] = Field(
         "auto",
         description="torch intra-op threads of the learner's update; auto: every core with "

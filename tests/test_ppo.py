@@ -39,3 +39,51 @@ def test_gradient_vanishes_outside_the_clip_region():
     loss2, _ = _loss_with_advantage_one(new2)
     loss2.backward()
     assert float(new2.grad) == pytest.approx(-1.0)  # d(−ρA)/dlogp at ρ = 1
+
+
+def _batch(rng: np.random.Generator, n: int = 256, obs_dim: int = 4, act_dim: int = 2):
+    from paramimic.rl.ppo import Batch
+
+    return Batch(
+        obs=rng.standard_normal((n, obs_dim)),
+        actions=rng.standard_normal((n, act_dim)),
+        logp=np.full(n, -2.0),
+        values=np.zeros(n),
+        advantages=rng.standard_normal(n),
+        returns=rng.standard_normal(n),
+        tasks=np.zeros((n, 1)),
+    )
+
+
+def _learner(**ppo):
+    from paramimic.config import PPOConfig
+    from paramimic.rl.ppo import PPOLearner
+
+    cfg = PPOConfig(num_steps=256, minibatch_size=64, num_epochs=2, hidden_sizes=(16,), **ppo)
+    return PPOLearner(4, 2, cfg, seed=0)
+
+
+def test_a_frozen_std_stays_where_it_was_set_and_the_rest_learns():
+    learner = _learner(learn_std=False, init_log_std=float(np.log(0.2)))
+    before = [p.detach().clone() for p in learner.policy.pi.parameters()]
+    metrics = learner.update(_batch(np.random.default_rng(0)))
+    assert metrics["std"] == pytest.approx(0.2)
+    assert any(
+        not torch.equal(a, b) for a, b in zip(before, learner.policy.pi.parameters(), strict=True)
+    )
+    learned = _learner()  # the default learns it
+    assert learned.update(_batch(np.random.default_rng(0)))["std"] != pytest.approx(np.exp(-1.0))
+
+
+def test_the_adaptive_step_size_shrinks_on_large_kl_and_survives_a_checkpoint():
+    from paramimic.rl.ppo import LR_MIN
+
+    learner = _learner(desired_kl=1e-6, policy_lr=1e-3)  # every minibatch moves "too far"
+    metrics = learner.update(_batch(np.random.default_rng(1)))
+    # 8 minibatch steps, each / 1.5 once its KL exceeds 2e-6 (the first one sees KL 0 → x 1.5)
+    assert LR_MIN <= metrics["policy_lr"] < 1e-3 / 1.5**4
+    restored = _learner(desired_kl=1e-6, policy_lr=1e-3)
+    restored.load_state_dict(learner.state_dict())
+    assert restored.policy_opt.param_groups[0]["lr"] == metrics["policy_lr"]
+    fixed = _learner(policy_lr=1e-3)
+    assert fixed.update(_batch(np.random.default_rng(1)))["policy_lr"] == 1e-3

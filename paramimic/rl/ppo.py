@@ -202,3 +202,20 @@ class PPOLearner:
         self.normalizer.load_state_dict(state["normalizer"])
         self.rng.bit_generator.state = state["rng"]
         self.version = int(state["version"])
+
+
+def widen_task_inputs(
+    learner: PPOLearner, dims: np.ndarray, mean: np.ndarray, var: np.ndarray
+) -> None:
+    """Warm start of a family from a controller trained with the task inputs `dims` (the first
+    entries of the observation) held fixed: the first layer of π and V ignores them (their
+    weight columns are zeroed: every body acts as the trained one did at first) and the
+    normalizer takes their statistics over the new ranges (`mean`, `var`), so that they enter
+    as well-scaled inputs rather than as a constant's z-scores clipped at ±obs_clip."""
+    dims = np.asarray(dims, dtype=np.int64)
+    with torch.no_grad():
+        for net in (learner.policy.pi, learner.policy.v):
+            net[0].weight[:, torch.from_numpy(dims)] = 0.0
+    learner.normalizer.mean[dims] = mean
+    learner.normalizer.var[dims] = var
+    learner.policy.set_normalizer(learner.normalizer)

@@ -25,7 +25,7 @@ from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.rl.numpy_mlp import Layers
-from paramimic.rl.ppo import PPOLearner
+from paramimic.rl.ppo import PPOLearner, widen_task_inputs
 from paramimic.rl.rollout import (
     EpisodeSummary,
     Fragment,
@@ -153,6 +153,8 @@ class Trainer:
                 self.space, probe.trace_shape, sc.p_hidden, sc.p_lr, sc.p_batch, seed=seed + 4
             )
             self.bootstrap = Bootstrap(sc)
+        if cfg.train.init_from is not None:
+            self.warm_start(checkpoint.load(cfg.train.init_from))
         self.clip = probe.clip_setup() if self.skill else None  # what the curriculum needs
         self.curriculum = curriculum or new_curriculum(cfg, self.clip)
         self.progress = Progress()
@@ -180,6 +182,41 @@ class Trainer:
             self.motion_net.from_state(state["motion_net"])
             self.bootstrap.from_state(state["bootstrap"])
         self.progress = Progress(**state["progress"])
+
+    def warm_start(self, state: dict) -> None:
+        """Start π, V and the normalizer from another run's checkpoint (`train.init_from`) of
+        the same observation and action layout; optimizers, V̄ and the curriculum start fresh.
+        Task dims fixed in that run and ranges in this one are widened (`widen_task_inputs`);
+        a frozen std (`ppo.learn_std: false`) is this config's."""
+        source = ExperimentConfig.model_validate(state["config"])
+        if (state["obs_dim"], state["act_dim"]) != (self.obs_dim, self.act_dim):
+            raise ValueError(
+                f"train.init_from: {self.cfg.train.init_from} has observation/action sizes "
+                f"{state['obs_dim']}/{state['act_dim']}, this config's env has "
+                f"{self.obs_dim}/{self.act_dim} (same character, task dims and env needed)"
+            )
+        if list(source.task) != list(self.cfg.task):
+            raise ValueError(
+                f"train.init_from: task dims {list(source.task)} differ from this config's "
+                f"{list(self.cfg.task)}"
+            )
+        learner = self.learner
+        learner.policy.load_state_dict(state["learner"]["policy"])
+        learner.normalizer.load_state_dict(state["learner"]["normalizer"])
+        if not self.cfg.ppo.learn_std:
+            with torch.no_grad():
+                learner.policy.log_std.fill_(self.cfg.ppo.init_log_std)
+        widened = [
+            i
+            for i, name in enumerate(self.cfg.task)
+            if source.task[name][0] == source.task[name][1]
+            and self.cfg.task[name][0] < self.cfg.task[name][1]
+        ]
+        if widened:
+            low, high = (np.array([self.cfg.task[n][j] for n in self.cfg.task]) for j in (0, 1))
+            idx = np.array(widened)
+            mean, var = (low[idx] + high[idx]) / 2, (high[idx] - low[idx]) ** 2 / 12
+            widen_task_inputs(learner, idx, mean, var)  # uniform's mean and variance
 
     def save_checkpoint(self) -> Path:
         return checkpoint.save(self.run_dir, self.state_dict(), self.progress.iteration)
@@ -265,6 +302,7 @@ class Trainer:
             if on_checkpoint:
                 on_checkpoint(path, self.progress.iteration)
 
+        self.run_dir.mkdir(parents=True, exist_ok=True)
         log = (self.run_dir / "metrics.jsonl").open("a")
         try:
             while self.progress.env_steps < total_steps and not should_stop():

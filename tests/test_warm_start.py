@@ -1,0 +1,75 @@
+"""A family trained from its base body's controller (`train.init_from`, Part 9)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from paramimic.config import ExperimentConfig
+from services.learner.trainer import SerialBackend, Trainer
+
+
+def _config(tmp_path, name: str, legs: tuple[float, float], **train) -> ExperimentConfig:
+    return ExperimentConfig.model_validate(
+        {
+            "character": "walker",
+            "task": {"left_leg_length": legs, "right_leg_length": legs, "target_velocity": [1, 1]},
+            "env": {"physics_hz": 300},
+            "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1, "hidden_sizes": [32],
+                    "learn_std": False, "init_log_std": math.log(0.2)},
+            "curriculum": {"k": 0.0},
+            "actors": {"num_envs": 4},
+            "train": {"run_dir": str(tmp_path / name), "torch_threads": 1, **train},
+        }
+    )  # fmt: skip
+
+
+@pytest.fixture
+def base_run(tmp_path):
+    """Two iterations of the base body alone (legs fixed at 1.0), checkpointed."""
+    cfg = _config(tmp_path, "base", (1.0, 1.0))
+    (tmp_path / "base").mkdir()
+    trainer = Trainer(cfg, tmp_path / "base")
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    trainer.train(backend, 512)
+    backend.close()
+    return trainer
+
+
+def test_the_family_starts_acting_as_the_base_controller_on_every_body(tmp_path, base_run):
+    cfg = _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "base"))
+    family = Trainer(cfg, tmp_path / "family")
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((8, family.obs_dim)).astype(np.float32)
+    obs[:, :2] = 1.0  # the base body's legs
+    with torch.no_grad():
+        base_mean, base_value = base_run.learner.policy(torch.from_numpy(obs))
+        other = obs.copy()
+        other[:, :2] = [0.7, 1.3]  # another body: ignored at first
+        for o in (obs, other):
+            mean, value = family.learner.policy(torch.from_numpy(o))
+            torch.testing.assert_close(mean, base_mean)
+            torch.testing.assert_close(value, base_value)
+    # the leg inputs are scaled as the uniform distribution over [0.7, 1.3] is
+    np.testing.assert_allclose(family.learner.normalizer.mean[:2], 1.0)
+    np.testing.assert_allclose(family.learner.normalizer.var[:2], 0.6**2 / 12)
+    # and the family learns to use them: the leg columns move with training
+    backend = SerialBackend(cfg, family.obs_dim, family.act_dim, family.curriculum)
+    family.train(backend, 512)
+    backend.close()
+    assert float(family.learner.policy.pi[0].weight[:, :2].abs().sum()) > 0
+    assert family.learner.policy.log_std.exp().mean().item() == pytest.approx(0.2)
+
+
+def test_a_checkpoint_of_another_layout_is_refused_naming_the_field(tmp_path, base_run):
+    cfg = ExperimentConfig.model_validate(
+        {
+            "character": "walker",
+            "task": {"target_velocity": [1, 1]},
+            "ppo": {"hidden_sizes": [32]},
+            "train": {"init_from": str(tmp_path / "base"), "run_dir": str(tmp_path / "x")},
+        }
+    )
+    with pytest.raises(ValueError, match="train.init_from"):
+        Trainer(cfg, tmp_path / "x")
