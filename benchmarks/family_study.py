@@ -51,6 +51,10 @@ VARIANTS: dict[str, dict] = {
     "base_legs": FROZEN | {"task.left_leg_length": [1.0, 1.0], "task.right_leg_length": [1.0, 1.0]},
     # the family from the base body's controller (run base_legs with the same seed first)
     "warm_std_frozen": FROZEN | {"train.init_from": "runs/study/base_legs_s{seed}"},
+    # the range grows from the base body as it is mastered (curriculum.widen), k = 10 inside it
+    "widen_std_frozen": FROZEN | {"curriculum.widen": {}},
+    "warm_widen_std_frozen": FROZEN
+    | {"curriculum.widen": {}, "train.init_from": "runs/study/base_legs_s{seed}"},
     "std_0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)},
     "std_frozen_gamma99": FROZEN | {"ppo.gamma": 0.99},
     "std_frozen_batch16k": FROZEN | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},

@@ -240,6 +240,21 @@ class SkillCurriculumConfig(Section):
         return self
 
 
+class WidenConfig(Section):
+    """A task range that grows from the box's centre (the base body) as the controller masters
+    it: automatic domain randomization's rule (OpenAI 2019) on one width for all free dims. Tasks
+    drawn from S are pulled toward the centre to `width` of their offset (V̄ sampling runs
+    inside the current range); after every `window` training episodes the width grows by `step`
+    if fewer than `promote_below` of them fell."""
+
+    start: float = Field(0.2, ge=0, le=1, description="initial width, a share of each range")
+    step: float = Field(0.1, gt=0, le=1, description="width added on a promotion")
+    window: int = Field(256, ge=1, description="training episodes per promotion decision")
+    promote_below: float = Field(
+        0.5, gt=0, le=1, description="grow when fewer than this share of the window's episodes fell"
+    )
+
+
 class CurriculumConfig(Section):
     """Adaptive sampling of task parameters ([WL19] §4.2, Alg. 1, Table 2)."""
 
@@ -258,6 +273,9 @@ class CurriculumConfig(Section):
     marginal_batch: int = Field(128, ge=1, description="minibatch of (a, v) pairs ([L21] §7)")
     display_dims: tuple[str, ...] | None = Field(
         None, description="two task dims for grids (default: the first two free)"
+    )
+    widen: WidenConfig | None = Field(
+        None, description="grow the task range from its centre as it is mastered (none: all of it)"
     )
     skill: SkillCurriculumConfig = SkillCurriculumConfig()
 
@@ -363,6 +381,11 @@ class ExperimentConfig(Section):
 
     @model_validator(mode="after")
     def _valid_task(self) -> ExperimentConfig:
+        if self.curriculum.widen is not None and self.env.clip is not None:
+            raise ValueError(
+                "curriculum.widen: a widening range is for [WL19] families (env.clip unset); "
+                "[L21] skills grow their explored region by the exploration curriculum"
+            )
         registration = _registry().registration(self.character)
         character = registration.character
         allowed = set(character.param_names()) | set(TASK_GOALS)

@@ -62,3 +62,67 @@ def test_k_zero_is_uniform_and_negative_k_is_refused():
     assert c.mode == "uniform"
     with pytest.raises(ValueError, match="k must be >= 0"):
         c.set_k(-1)
+
+
+def _widening(**widen) -> AdaptiveCurriculum:
+    cfg = ExperimentConfig.model_validate(
+        {
+            "character": "hopper",
+            "task": TWO,
+            "curriculum": {"n_mcmc": 40, "k": 5.0, "widen": {"window": 10, **widen}},
+        }
+    )
+    return AdaptiveCurriculum.from_config(cfg)
+
+
+def _episodes(n: int, falls: int) -> list[dict]:
+    return [{"length": 10, "fell": i < falls, "diverged": False, "return": 1.0} for i in range(n)]
+
+
+def test_a_widening_range_starts_at_the_centre_and_grows_when_mastered():
+    c = _widening(start=0.2, step=0.3, promote_below=0.5)
+    c.update_marginal(_layers(3), mu=3.0, iteration=0, refill=True)
+    tasks = c.next_tasks(200)
+    # legs 0.8-1.2 → 0.96-1.04 at width 0.2, torso 0.9-1.1 → 0.98-1.02; the velocity is fixed
+    assert tasks[:, 0].min() >= 0.96 - 1e-12 and tasks[:, 0].max() <= 1.04 + 1e-12
+    assert tasks[:, 0].max() - tasks[:, 0].min() > 0.05  # and it is used
+    assert tasks[:, 1].min() >= 0.98 - 1e-12 and tasks[:, 1].max() <= 1.02 + 1e-12
+    c.ingest(_episodes(10, falls=6))  # 60 % fell: not yet
+    assert c.width == pytest.approx(0.2)
+    c.ingest(_episodes(10, falls=4))  # 40 %: grow
+    assert c.width == pytest.approx(0.5)
+    c.ingest(_episodes(9, falls=0))  # a window is 10 episodes
+    assert c.width == pytest.approx(0.5)
+    c.ingest(_episodes(1, falls=0) + _episodes(20, falls=0))
+    assert c.width == 1.0 and c.summary()["range_width"] == 1.0  # capped at the whole range
+
+
+def test_v_bar_sampling_runs_inside_the_current_range_and_the_width_survives_a_restart():
+    c = _widening(start=0.5)
+    seen = []
+
+    def v_bar(a):  # what MCMC evaluates: the points the agent will train on
+        seen.append(np.asarray(a).copy())
+        return np.ones(len(a))
+
+    c.sampler.refill(lambda a: v_bar(c.pull(a)), 1.0)
+    pts = np.concatenate(seen)
+    assert pts[:, 0].min() >= 0.9 - 1e-12 and pts[:, 0].max() <= 1.1 + 1e-12
+    c.ingest(_episodes(3, falls=1))
+    d = _widening(start=0.5)
+    d.from_state(c.to_state())
+    assert (d.width, d.window) == (0.5, [3, 1])
+
+
+def test_without_widen_the_range_is_whole():
+    c = _curriculum(TWO)
+    assert c.width == 1.0
+    tasks = c.next_tasks(500)
+    assert tasks[:, 0].min() < 0.85 and tasks[:, 0].max() > 1.15
+
+
+def test_widen_is_refused_for_a_skill_clip():
+    with pytest.raises(ValueError, match="curriculum.widen"):
+        ExperimentConfig.model_validate(
+            {"character": "walker", "env": {"clip": "planar_jump"}, "curriculum": {"widen": {}}}
+        )

@@ -51,6 +51,8 @@ class AdaptiveCurriculum:
         self.mu: float | None = None
         self.marginal_iteration = -1
         self.stats: dict[str, float] = dict.fromkeys(STAT_FIELDS, 0)
+        self.width = config.widen.start if config.widen is not None else 1.0
+        self.window = [0, 0]  # episodes and falls since the last widening decision
         self._stats_of: np.ndarray | None = None  # the buffer whose mean/std are cached
         self._stats: tuple[dict, dict] = ({}, {})
 
@@ -71,11 +73,20 @@ class AdaptiveCurriculum:
         self.mu = float(mu)
         self.marginal_iteration = int(iteration)
         if refill:
-            self.sampler.refill(marginal_function(self.layers, self.space), self.mu)
+            v_bar = marginal_function(self.layers, self.space)
+            self.sampler.refill(lambda a: v_bar(self.pull(a)), self.mu)
+
+    def pull(self, tasks: np.ndarray) -> np.ndarray:
+        """Tasks of the full box mapped into the current range: toward the box's centre to
+        `width` of their offset (the identity without `widen`)."""
+        if self.width >= 1.0:
+            return tasks
+        center = self.space.center
+        return center + self.width * (np.asarray(tasks) - center)
 
     def next_tasks(self, n: int) -> np.ndarray:
         """n task parameters drawn from S: [n, d]."""
-        tasks = self.sampler.next_tasks(n)
+        tasks = self.pull(self.sampler.next_tasks(n))
         self.stats["tasks_served"] += n
         self.stats["batches"] += 1
         return tasks
@@ -94,7 +105,20 @@ class AdaptiveCurriculum:
             self.stats["falls"] += int(bool(e["fell"]))
             self.stats["diverged"] += int(bool(e["diverged"]))
             self.stats["return_sum"] += float(e["return"])
+            self._widen(bool(e["fell"]))
         return n
+
+    def _widen(self, fell: bool) -> None:
+        """Count an episode toward the next widening decision (`WidenConfig`)."""
+        rule = self.config.widen
+        if rule is None or self.width >= 1.0:
+            return
+        self.window[0] += 1
+        self.window[1] += int(fell)
+        if self.window[0] >= rule.window:
+            if self.window[1] < rule.promote_below * self.window[0]:
+                self.width = min(1.0, self.width + rule.step)
+            self.window = [0, 0]
 
     def set_k(self, k: float) -> None:
         if not k >= 0:
@@ -147,6 +171,7 @@ class AdaptiveCurriculum:
             "mean_return": s["return_sum"] / episodes if s["episodes"] else None,
             "fall_percent": 100.0 * s["falls"] / episodes if s["episodes"] else None,
             "tasks_served": int(s["tasks_served"]),
+            "range_width": self.width,
             # [L21] §6 fields, filled by the exploration/refinement curriculum (Part 4)
             "phase": None,
             "explored_ratio": None,
@@ -178,6 +203,8 @@ class AdaptiveCurriculum:
                 "mu": self.mu,
                 "marginal_iteration": self.marginal_iteration,
                 "stats": dict(self.stats),
+                "width": self.width,
+                "window": list(self.window),
             }
         if "marginal" in parts:
             state["marginal"] = (
@@ -190,6 +217,8 @@ class AdaptiveCurriculum:
         self.mu = core.pop("mu")
         self.marginal_iteration = int(core.pop("marginal_iteration"))
         self.stats = dict.fromkeys(STAT_FIELDS, 0) | core.pop("stats")
+        self.width = float(core.pop("width", 1.0 if self.config.widen is None else self.width))
+        self.window = list(core.pop("window", [0, 0]))
         self.sampler.from_state(core | {"buffer": state["buffer"]})
         marginal = state["marginal"]
         self.layers = None if marginal is None else float32_layers(marginal)

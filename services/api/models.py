@@ -79,6 +79,9 @@ class Curriculum(BaseModel):
     mean_return: float | None
     fall_percent: float | None
     tasks_served: int
+    range_width: float | None = Field(
+        None, description="share of each task range in use (curriculum.widen; 1: all of it)"
+    )
     paused: bool
     phase: str | None = Field(
         None, description="[L21] §6: base (π0), exploration, refinement, or uniform"
