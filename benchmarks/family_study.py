@@ -105,7 +105,7 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
         7,
     )
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
-    keep = ("env_steps", "mean_return", "fall_percent", "std", "approx_kl", "policy_lr")
+    keep = ("env_steps", "mean_return", "fall_percent", "std", "approx_kl", "range_width")
     report |= {
         "variant": variant,
         "overrides": VARIANTS[variant],

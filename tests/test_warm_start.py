@@ -58,7 +58,7 @@ def test_the_family_starts_acting_as_the_base_controller_on_every_body(tmp_path,
     backend = SerialBackend(cfg, family.obs_dim, family.act_dim, family.curriculum)
     family.train(backend, 512)
     backend.close()
-    assert float(family.learner.policy.pi[0].weight[:, :2].abs().sum()) > 0
+    assert float(family.learner.policy.pi[0].weight[:, :2].detach().abs().sum()) > 0
     assert family.learner.policy.log_std.exp().mean().item() == pytest.approx(0.2)
 
 
@@ -73,3 +73,17 @@ def test_a_checkpoint_of_another_layout_is_refused_naming_the_field(tmp_path, ba
     )
     with pytest.raises(ValueError, match="train.init_from"):
         Trainer(cfg, tmp_path / "x")
+
+
+def test_a_widening_family_reports_its_width_each_iteration(tmp_path):
+    raw = _config(tmp_path, "wide", (0.7, 1.3)).model_dump()
+    raw["curriculum"]["widen"] = {"start": 0.3, "window": 4}
+    cfg = ExperimentConfig.model_validate(raw)
+    trainer = Trainer(cfg, tmp_path / "wide")
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    m = trainer.iteration(backend)
+    backend.close()
+    assert 0.3 <= m["range_width"] <= 1.0
+    width = trainer.curriculum.width
+    legs = trainer.curriculum.next_tasks(100)[:, :2]  # 1 ± 0.3 of the whole range, scaled
+    assert np.all(np.abs(legs - 1.0) <= 0.3 * width + 1e-9)

@@ -272,6 +272,8 @@ class _progress_bar:
             f"return {m.get('mean_return', float('nan')):.2f}  "
             f"fall {m.get('fall_percent', float('nan')):.0f}%"
         )
+        if "range_width" in m:
+            info += f"  range {100 * m['range_width']:.0f}%"
         if m.get("actor_restarts"):
             info += f"  restarts {m['actor_restarts']}"
         self.bar.update(self.task, completed=m["env_steps"], info=info)

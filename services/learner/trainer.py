@@ -245,6 +245,8 @@ class Trainer:
         metrics.update(episode_metrics(episodes))
         if self.skill:
             metrics.update(self.update_motion(metrics.get("mean_return")))
+        if cfg.curriculum.widen is not None:  # how much of the task range is in use
+            metrics["range_width"] = self.curriculum.summary()["range_width"]
         elapsed = time.perf_counter() - t0
         metrics.update(backend.stats())
         # versions between the policy that sampled each fragment and the one that was updated
