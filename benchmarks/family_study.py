@@ -9,6 +9,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py run std_frozen --seed 0 --steps 2000000
     python benchmarks/family_study.py queue std_frozen,kl_adaptive --seeds 0 --steps 2000000
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
+    python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
 
 Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
 the training curve); `merge` writes study.json: per variant and budget, mean and spread over
@@ -121,6 +122,43 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
     return report
 
 
+def probe(variant: str, seed: int, episodes: int = 100) -> dict:
+    """A study run's controller (its latest checkpoint) on the whole family of CONFIG: e.g. how
+    far the base body's controller (`base_legs`) carries, blind to the shape as a warm start
+    begins. Writes study_probe_<variant>_s<seed>.json."""
+    warnings.filterwarnings("ignore")
+    import torch
+
+    from paramimic.config import ExperimentConfig, load_config
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, evaluate
+    from paramimic.rl.ppo import PPOLearner, adopt_controller
+    from paramimic.task_space import TaskSpace
+    from services.learner import checkpoint
+    from services.learner.trainer import reset_observations
+
+    state = checkpoint.load(RUNS / f"{variant}_s{seed}")
+    source = ExperimentConfig.model_validate(state["config"])
+    cfg = load_config(ROOT / CONFIG, {"env": source.env.model_dump()})
+    learner = PPOLearner(state["obs_dim"], state["act_dim"], source.ppo)
+    adopt_controller(learner, state["learner"], reset_observations(cfg))  # as a warm start
+    policy = learner.policy
+    torch.set_num_threads(1)
+    env_cfg = cfg.env.model_copy(update={"max_episode_seconds": 10.0})
+    report = evaluate(
+        deterministic(policy),
+        lambda: make_env(cfg.character, cfg.task, env_cfg),
+        TaskSpace.from_ranges(cfg.task),
+        episodes,
+        EVAL_SEED,
+        cfg.grid_dims(),
+        7,
+    )
+    report |= {"variant": variant, "seed": seed, "family": CONFIG}
+    (RESULTS / f"study_probe_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
 def _spread(values: list[float]) -> dict:
     a = np.array(values, dtype=float)
     return {"mean": float(a.mean()), "min": float(a.min()), "max": float(a.max()), "n": len(a)}
@@ -129,6 +167,8 @@ def _spread(values: list[float]) -> dict:
 def merge() -> dict:
     groups: dict[tuple[str, float], list[dict]] = {}
     for path in sorted(RESULTS.glob("study_*_s*_*M.json")):
+        if path.name.startswith("study_probe_"):
+            continue
         r = json.loads(path.read_text())
         groups.setdefault((r["variant"], round(r["env_steps"] / 1e6)), []).append(r)
     table = {}
@@ -193,7 +233,7 @@ def _plot(groups: dict) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("command", choices=["run", "queue", "merge"])
+    ap.add_argument("command", choices=["run", "queue", "merge", "probe"])
     ap.add_argument("variants", nargs="?", default="shipped", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
@@ -205,6 +245,11 @@ def main() -> None:
             raise SystemExit(f"unknown variant {v!r}; variants: {sorted(VARIANTS)}")
     if args.command == "merge":
         merge()
+    elif args.command == "probe":
+        r = probe(args.variants, args.seed)
+        print(f"{args.variants} s{args.seed} on {CONFIG}: falls {r['fall_percent']:.1f} %")
+        for y, row in zip(r["grid"]["y"], r["grid"]["returns"], strict=True):
+            print(f"{y:4.2f}", " ".join(f"{v:5.0f}" for v in row))
     elif args.command == "run":
         r = run(args.variants, args.seed, args.steps)
         print(f"{args.variants} s{args.seed}: falls {r['fall_percent']:.1f} %")

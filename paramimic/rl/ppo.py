@@ -204,18 +204,26 @@ class PPOLearner:
         self.version = int(state["version"])
 
 
-def widen_task_inputs(
-    learner: PPOLearner, dims: np.ndarray, mean: np.ndarray, var: np.ndarray
-) -> None:
-    """Warm start of a family from a controller trained with the task inputs `dims` (the first
-    entries of the observation) held fixed: the first layer of π and V ignores them (their
-    weight columns are zeroed: every body acts as the trained one did at first) and the
-    normalizer takes their statistics over the new ranges (`mean`, `var`), so that they enter
-    as well-scaled inputs rather than as a constant's z-scores clipped at ±obs_clip."""
-    dims = np.asarray(dims, dtype=np.int64)
+CONSTANT = 1e-10  # an observation variance this small: the input never changed
+
+
+def adopt_controller(learner: PPOLearner, source: dict, observations: np.ndarray) -> np.ndarray:
+    """Warm start from `source`, a `PPOLearner.state_dict()` of the same observation and action
+    layout: its π, V and normalizer. Inputs that were constant in the source's experience
+    (normalizer variance ≈ 0: task dims it trained with fixed, and what follows from them, such
+    as a body's own target speed) but vary in `observations` (resets of the new task space)
+    start ignored: their first-layer weights in π and V are zeroed, so every new task first
+    gets the source's actions and values, and their normalizer statistics become those of
+    `observations`, so they enter as well-scaled inputs instead of a constant's z-scores
+    clipped at ±obs_clip. Returns those input indices."""
+    learner.policy.load_state_dict(source["policy"])
+    learner.normalizer.load_state_dict(source["normalizer"])
+    sample_var = observations.var(axis=0)
+    dims = np.flatnonzero((learner.normalizer.var < CONSTANT) & (sample_var > CONSTANT))
     with torch.no_grad():
         for net in (learner.policy.pi, learner.policy.v):
             net[0].weight[:, torch.from_numpy(dims)] = 0.0
-    learner.normalizer.mean[dims] = mean
-    learner.normalizer.var[dims] = var
+    learner.normalizer.mean[dims] = observations.mean(axis=0)[dims]
+    learner.normalizer.var[dims] = sample_var[dims]
     learner.policy.set_normalizer(learner.normalizer)
+    return dims

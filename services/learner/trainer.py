@@ -25,7 +25,7 @@ from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.rl.numpy_mlp import Layers
-from paramimic.rl.ppo import PPOLearner, widen_task_inputs
+from paramimic.rl.ppo import PPOLearner, adopt_controller
 from paramimic.rl.rollout import (
     EpisodeSummary,
     Fragment,
@@ -185,38 +185,19 @@ class Trainer:
 
     def warm_start(self, state: dict) -> None:
         """Start π, V and the normalizer from another run's checkpoint (`train.init_from`) of
-        the same observation and action layout; optimizers, V̄ and the curriculum start fresh.
-        Task dims fixed in that run and ranges in this one are widened (`widen_task_inputs`);
-        a frozen std (`ppo.learn_std: false`) is this config's."""
-        source = ExperimentConfig.model_validate(state["config"])
+        the same observation and action layout (`adopt_controller`, with 64 resets of this
+        config's env as the new inputs' statistics); optimizers, V̄ and the curriculum start
+        fresh. A frozen std (`ppo.learn_std: false`) is this config's."""
         if (state["obs_dim"], state["act_dim"]) != (self.obs_dim, self.act_dim):
             raise ValueError(
                 f"train.init_from: {self.cfg.train.init_from} has observation/action sizes "
                 f"{state['obs_dim']}/{state['act_dim']}, this config's env has "
                 f"{self.obs_dim}/{self.act_dim} (same character, task dims and env needed)"
             )
-        if list(source.task) != list(self.cfg.task):
-            raise ValueError(
-                f"train.init_from: task dims {list(source.task)} differ from this config's "
-                f"{list(self.cfg.task)}"
-            )
-        learner = self.learner
-        learner.policy.load_state_dict(state["learner"]["policy"])
-        learner.normalizer.load_state_dict(state["learner"]["normalizer"])
+        adopt_controller(self.learner, state["learner"], reset_observations(self.cfg))
         if not self.cfg.ppo.learn_std:
             with torch.no_grad():
-                learner.policy.log_std.fill_(self.cfg.ppo.init_log_std)
-        widened = [
-            i
-            for i, name in enumerate(self.cfg.task)
-            if source.task[name][0] == source.task[name][1]
-            and self.cfg.task[name][0] < self.cfg.task[name][1]
-        ]
-        if widened:
-            low, high = (np.array([self.cfg.task[n][j] for n in self.cfg.task]) for j in (0, 1))
-            idx = np.array(widened)
-            mean, var = (low[idx] + high[idx]) / 2, (high[idx] - low[idx]) ** 2 / 12
-            widen_task_inputs(learner, idx, mean, var)  # uniform's mean and variance
+                self.learner.policy.log_std.fill_(self.cfg.ppo.init_log_std)
 
     def save_checkpoint(self) -> Path:
         return checkpoint.save(self.run_dir, self.state_dict(), self.progress.iteration)
@@ -322,6 +303,12 @@ class Trainer:
         finally:
             log.close()
             checkpoint_now()
+
+
+def reset_observations(cfg: ExperimentConfig, n: int = 64) -> np.ndarray:
+    """Observations of `n` resets of the config's env (random tasks): [n, obs_dim]."""
+    env = make_env(cfg.character, cfg.task, cfg.env)
+    return np.stack([env.reset(seed=cfg.train.seed * 1000 + i)[0] for i in range(n)])
 
 
 def episode_metrics(episodes: list[EpisodeSummary]) -> dict:
