@@ -36,29 +36,40 @@ RUNS = ROOT / "runs" / "study"
 EVAL_SEED = 2024  # never a training seed
 EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
+# Every variant states the knobs the study varies, so that it means the same whatever the
+# config ships (configs/walker_legs.yaml now carries the winner, `std_frozen_gamma99`).
+LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
+G95 = {"ppo.gamma": 0.95}  # [WL19] Table 2
+G99 = {"ppo.gamma": 0.99}
 TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128}
+K0 = {"curriculum.k": 0.0}
+BASE_LEGS = "runs/study/base_legs_s{seed}"
 VARIANTS: dict[str, dict] = {
-    # the config as shipped (every Part 9 rule fix included)
-    "shipped": {},
-    "k0": {"curriculum.k": 0.0},
-    "std_frozen": FROZEN,
-    "std_frozen_k0": FROZEN | {"curriculum.k": 0.0},
-    "kl_adaptive": {"ppo.desired_kl": 0.01},
-    "std_frozen_kl_adaptive": FROZEN | {"ppo.desired_kl": 0.01},
-    "table2_steps": TABLE2,
-    "std_frozen_table2": FROZEN | TABLE2,
+    # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
+    "learned_std": LEARNED | G95,
+    "k0": LEARNED | G95 | K0,
+    "kl_adaptive": LEARNED | G95 | {"ppo.desired_kl": 0.01},
+    "table2_steps": LEARNED | G95 | TABLE2,
+    "std_frozen": FROZEN | G95,
+    "std_frozen_k0": FROZEN | G95 | K0,
+    "std_frozen_kl_adaptive": FROZEN | G95 | {"ppo.desired_kl": 0.01},
+    "std_frozen_table2": FROZEN | G95 | TABLE2,
+    "std_0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)} | G95,
+    "std_frozen_batch16k": FROZEN | G95 | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},
     # the base body alone (legs fixed at 1.0, the family's env layout): the warm start's source
-    "base_legs": FROZEN | {"task.left_leg_length": [1.0, 1.0], "task.right_leg_length": [1.0, 1.0]},
+    "base_legs": FROZEN
+    | G95
+    | {"task.left_leg_length": [1.0, 1.0], "task.right_leg_length": [1.0, 1.0]},
     # the family from the base body's controller (run base_legs with the same seed first)
-    "warm_std_frozen": FROZEN | {"train.init_from": "runs/study/base_legs_s{seed}"},
+    "warm_std_frozen": FROZEN | G95 | {"train.init_from": BASE_LEGS},
     # the range grows from the base body as it is mastered (curriculum.widen), k = 10 inside it
-    "widen_std_frozen": FROZEN | {"curriculum.widen": {}},
-    "warm_widen_std_frozen": FROZEN
-    | {"curriculum.widen": {}, "train.init_from": "runs/study/base_legs_s{seed}"},
-    "std_0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)},
-    "std_frozen_gamma99": FROZEN | {"ppo.gamma": 0.99},
-    "std_frozen_batch16k": FROZEN | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},
+    "widen_std_frozen": FROZEN | G95 | {"curriculum.widen": {}},
+    "warm_widen_std_frozen": FROZEN | G95 | {"curriculum.widen": {}, "train.init_from": BASE_LEGS},
+    # the winner (the config's defaults since Part 9) and its uniform-sampling twin
+    "std_frozen_gamma99": FROZEN | G99,
+    "std_frozen_gamma99_k0": FROZEN | G99 | K0,
+    "std_frozen_gamma99_widen": FROZEN | G99 | {"curriculum.widen": {}},
 }
 
 
@@ -175,7 +186,7 @@ def merge() -> dict:
     for (variant, millions), runs in sorted(groups.items()):
         table[f"{variant}@{millions}M"] = {
             "seeds": [r["seed"] for r in runs],
-            "overrides": runs[0]["overrides"],
+            "overrides": VARIANTS.get(variant, runs[0]["overrides"]),
             "fall_percent": _spread([r["fall_percent"] for r in runs]),
             "mean_return": _spread([r["mean_return"] for r in runs]),
             "worst_decile_return": _spread([r["worst_decile_return"] for r in runs]),
