@@ -245,7 +245,7 @@ def _plot(groups: dict) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("command", choices=["run", "queue", "merge", "probe"])
-    ap.add_argument("variants", nargs="?", default="shipped", help="comma-separated")
+    ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
     ap.add_argument("--steps", type=int, default=2_000_000)

@@ -96,3 +96,8 @@ def test_a_widening_family_reports_its_width_each_iteration(tmp_path):
     width = trainer.curriculum.width
     legs = trainer.curriculum.next_tasks(100)[:, :2]  # 1 ± 0.3 of the whole range, scaled
     assert np.all(np.abs(legs - 1.0) <= 0.3 * width + 1e-9)
+
+
+def test_a_missing_source_fails_when_the_config_loads(tmp_path):
+    with pytest.raises(ValueError, match="init_from"):
+        _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))

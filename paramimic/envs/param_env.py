@@ -184,8 +184,8 @@ class ParamEnv(EnvCore):
         """The fall rule: a fall is the root below `fall_height_ratio` of `height`, the body's
         own standing height, i.e. its root height placed on the ground by [WL19] Eq. 1 in its
         reference pose at the episode's start. Not the straight legs' hip height: a body with
-        legs 0.7/1.3 stands on its short leg (and the base body stands with bent knees), so a
-        threshold from the longest leg would count bodies as fallen that stand."""
+        legs 0.7/1.3 stands on its short leg, so a threshold from the longest leg counted
+        bodies as fallen that stand (tests/test_family_rules.py)."""
         self._standing = (height, self.character.hip_height)
         self._fall_height = self.config.fall_height_ratio * height
 
