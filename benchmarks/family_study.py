@@ -226,10 +226,10 @@ def _plot(groups: dict) -> None:
         for j, r in enumerate(runs):
             x = [m["env_steps"] / 1e6 for m in r["curve"]]
             for ax, key in zip(axes, ("fall_percent", "mean_return", "std"), strict=True):
-                y = [m.get(key, np.nan) for m in r["curve"]]
-                if key != "std":  # training episodes are noisy: a moving average of 10
-                    y = np.convolve(y, np.ones(10) / 10, mode="same")
-                ax.plot(x, y, color=colors[i % len(colors)], alpha=0.8,
+                y = np.array([m.get(key, np.nan) for m in r["curve"]])
+                if key != "std" and len(y) >= 10:  # noisy episodes: a moving average of 10
+                    y = np.convolve(y, np.ones(10) / 10, mode="valid")
+                ax.plot(x[len(x) - len(y) :], y, color=colors[i % len(colors)], alpha=0.8,
                         label=variant if j == 0 else None)  # fmt: skip
     for ax, title in zip(
         axes, ("training falls (%)", "training return", "policy std"), strict=True
