@@ -315,8 +315,8 @@ class TrainConfig(Section):
     init_from: Path | None = Field(
         None,
         description="warm start: the policy, value and normalizer of this checkpoint (a run dir "
-        "or .pt) of the same env layout, e.g. the base body's controller for its family; task "
-        "dims that were fixed there and are ranges here start ignored (`widen_task_inputs`)",
+        "or .pt) of the same env layout, e.g. the base body's controller for its family; inputs "
+        "constant there that vary here (fixed task dims) start ignored (`adopt_controller`)",
     )
     torch_threads: int | Literal["auto"] = Field(
         "auto",
