@@ -81,8 +81,7 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
     """Train (or continue) one variant and seed to `steps` env steps, then evaluate."""
     warnings.filterwarnings("ignore")
     from paramimic.config import load_config
-    from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, evaluate
+    from paramimic.evaluation import evaluate_config
     from services.learner import checkpoint
     from services.learner.trainer import SerialBackend, Trainer
 
@@ -106,16 +105,7 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
     t0 = time.perf_counter()
     trainer.train(backend, steps)
     backend.close()
-    env_cfg = cfg.env.model_copy(update={"max_episode_seconds": 10.0})
-    report = evaluate(
-        deterministic(trainer.learner.policy),
-        lambda: make_env(cfg.character, cfg.task, env_cfg),
-        trainer.space,
-        EVAL_EPISODES,
-        EVAL_SEED,
-        cfg.grid_dims(),
-        7,
-    )
+    report = evaluate_config(trainer.learner.policy, cfg, EVAL_EPISODES, EVAL_SEED, 7, seconds=10.0)
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
     keep = ("env_steps", "mean_return", "fall_percent", "std", "approx_kl", "range_width")
     report |= {
@@ -141,10 +131,8 @@ def probe(variant: str, seed: int, episodes: int = 100) -> dict:
     import torch
 
     from paramimic.config import ExperimentConfig, load_config
-    from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, evaluate
+    from paramimic.evaluation import evaluate_config
     from paramimic.rl.ppo import PPOLearner, adopt_controller
-    from paramimic.task_space import TaskSpace
     from services.learner import checkpoint
     from services.learner.trainer import reset_observations
 
@@ -153,18 +141,8 @@ def probe(variant: str, seed: int, episodes: int = 100) -> dict:
     cfg = load_config(ROOT / CONFIG, {"env": source.env.model_dump()})
     learner = PPOLearner(state["obs_dim"], state["act_dim"], source.ppo)
     adopt_controller(learner, state["learner"], reset_observations(cfg))  # as a warm start
-    policy = learner.policy
     torch.set_num_threads(1)
-    env_cfg = cfg.env.model_copy(update={"max_episode_seconds": 10.0})
-    report = evaluate(
-        deterministic(policy),
-        lambda: make_env(cfg.character, cfg.task, env_cfg),
-        TaskSpace.from_ranges(cfg.task),
-        episodes,
-        EVAL_SEED,
-        cfg.grid_dims(),
-        7,
-    )
+    report = evaluate_config(learner.policy, cfg, episodes, EVAL_SEED, 7, seconds=10.0)
     report |= {"variant": variant, "seed": seed, "family": CONFIG}
     (RESULTS / f"study_probe_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
     return report

@@ -51,8 +51,7 @@ def _train_ours(
     import torch
 
     from paramimic.config import load_config
-    from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, evaluate
+    from paramimic.evaluation import evaluate_config
     from services.learner.trainer import SerialBackend, Trainer
 
     cfg = load_config(
@@ -83,17 +82,8 @@ def _train_ours(
         backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
         trainer.train(backend, steps)
     train_seconds = time.perf_counter() - t0
-    env_cfg = cfg.env.model_copy(
-        update={"max_episode_seconds": eval_seconds or cfg.env.max_episode_seconds}
-    )
-    report = evaluate(
-        deterministic(trainer.learner.policy),
-        lambda: make_env(cfg.character, cfg.task, env_cfg),
-        trainer.space,
-        EVAL_EPISODES,
-        EVAL_SEED,
-        cfg.grid_dims(),
-        5,
+    report = evaluate_config(
+        trainer.learner.policy, cfg, EVAL_EPISODES, EVAL_SEED, 5, seconds=eval_seconds
     )
     report.update(
         {

@@ -36,7 +36,7 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import get_character
-from paramimic.envs import ParamEnv, SkillEnv, make_env
+from paramimic.envs import ParamEnv, SkillEnv
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
@@ -150,7 +150,7 @@ def learning(config: str, hz: int, seed: int, budget: float) -> dict:
     import torch
 
     from paramimic.config import load_config
-    from paramimic.evaluation import deterministic, evaluate
+    from paramimic.evaluation import evaluate_config
     from services.learner.trainer import SerialBackend, Trainer
 
     run_dir = ROOT / "runs" / "bench" / f"physics_{Path(config).stem}_{hz}_s{seed}"
@@ -164,15 +164,7 @@ def learning(config: str, hz: int, seed: int, budget: float) -> dict:
     t0 = time.perf_counter()
     trainer.train(backend, 10**9, should_stop=lambda: time.perf_counter() - t0 > budget)
     seconds = time.perf_counter() - t0
-    report = evaluate(
-        deterministic(trainer.learner.policy),
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
-        trainer.space,
-        300,
-        12345,
-        cfg.grid_dims(),
-        5,
-    )
+    report = evaluate_config(trainer.learner.policy, cfg, 300, 12345, 5)
     report |= {"physics_hz": hz, "seed": seed, "config": config, "budget_seconds": budget,
                "train_seconds": seconds, "env_steps": trainer.progress.env_steps}  # fmt: skip
     path = RESULTS / f"physics_rate_learning_{Path(config).stem}_{hz}_s{seed}.json"

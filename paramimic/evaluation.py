@@ -144,3 +144,31 @@ def evaluate(
             "uniformity": uniformity(rets.ravel()),
         }
     return report
+
+
+def evaluate_config(
+    policy: ActorCritic,
+    cfg,
+    episodes: int,
+    seed: int,
+    grid_size: int,
+    seconds: float | None = None,
+) -> dict:
+    """`evaluate` of the deterministic `policy` on an experiment config's env and task space
+    (`cfg`: an ExperimentConfig), episodes of `seconds` (default: the config's horizon), the
+    grid over the config's display dims."""
+    from paramimic.envs import make_env
+
+    env_cfg = cfg.env.model_copy(
+        update={"max_episode_seconds": seconds or cfg.env.max_episode_seconds}
+    )
+    space = make_env(cfg.character, cfg.task, env_cfg).task_space
+    return evaluate(
+        deterministic(policy),
+        lambda: make_env(cfg.character, cfg.task, env_cfg),
+        space,
+        episodes,
+        seed,
+        cfg.grid_dims(),
+        grid_size,
+    )

@@ -101,3 +101,18 @@ def test_a_widening_family_reports_its_width_each_iteration(tmp_path):
 def test_a_missing_source_fails_when_the_config_loads(tmp_path):
     with pytest.raises(ValueError, match="init_from"):
         _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))
+
+
+def test_evaluate_config_runs_the_configs_env_task_space_and_horizon(tmp_path):
+    from paramimic.evaluation import evaluate_config
+    from paramimic.rl.networks import ActorCritic
+
+    cfg = _config(tmp_path, "eval", (0.7, 1.3))
+    env = make_env(cfg.character, cfg.task, cfg.env)
+    policy = ActorCritic(env.observation_space.shape[0], env.action_space.shape[0], (16,), -1.0)
+    report = evaluate_config(policy, cfg, 4, 0, 3, seconds=0.5)
+    assert len(report["grid"]["returns"]) == 3 and report["grid"]["dims"] == [
+        "left_leg_length",
+        "right_leg_length",
+    ]
+    assert 0 < report["mean_return"] <= 15  # at most 15 steps of reward ≤ 1 in 0.5 s
