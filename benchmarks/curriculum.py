@@ -11,7 +11,9 @@ whose elite density is at least D = 0.8, on 2,048 fixed probe points).
 Writes benchmarks/results/curriculum.json (per run: N, ER, elites, phase per iteration; the ER
 of each run at common N; the ratio curriculum / uniform) and benchmarks/results/curriculum.png.
 Each run is the serial backend in its own process; --jobs runs that many at once (default 2,
-one per core: the learner uses one torch thread).
+one per core: the learner uses one torch thread). Each finished run is kept in
+benchmarks/results/curriculum_runs/<sampling>_s<seed>_<steps>.json and not run again, so seeds
+can be added later (`--seeds 0,1,2` reruns only the missing ones) and the comparison covers them.
 """
 
 from __future__ import annotations
@@ -172,6 +174,12 @@ def main() -> None:
         out.write_text(json.dumps(result, indent=1))
         return
     seeds = [int(s) for s in args.seeds.split(",")]
+    kept = RESULTS / "curriculum_runs"
+    kept.mkdir(parents=True, exist_ok=True)
+
+    def kept_path(sampling: str, seed: int) -> Path:
+        return kept / f"{sampling}_s{seed}_{args.steps}.json"
+
     jobs = [
         (
             args.config,
@@ -182,9 +190,16 @@ def main() -> None:
         )
         for seed in seeds
         for sampling in ("curriculum", "uniform")
+        if not kept_path(sampling, seed).exists()
     ]
     with multiprocessing.get_context("spawn").Pool(max(1, args.jobs)) as pool:
-        runs = pool.starmap(run, jobs)
+        for r in pool.starmap(run, jobs):
+            kept_path(r["sampling"], r["seed"]).write_text(json.dumps(r))
+    runs = [
+        json.loads(kept_path(sampling, seed).read_text())
+        for seed in seeds
+        for sampling in ("curriculum", "uniform")
+    ]
     result = {
         "config": args.config,
         "steps": args.steps,

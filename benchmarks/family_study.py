@@ -33,6 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = ROOT / "runs" / "study"
+sys.path.insert(0, str(ROOT / "benchmarks"))
 EVAL_SEED = 2024  # never a training seed
 EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
@@ -70,14 +71,40 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_gamma99": FROZEN | G99,
     "std_frozen_gamma99_k0": FROZEN | G99 | K0,
     "std_frozen_gamma99_widen": FROZEN | G99 | {"curriculum.widen": {}},
+    # the winning recipe on the [WL19] §5.3 3D characters (the issue's other target rows)
+    "biped_base": FROZEN | G99,
+    "biped_x0.5": FROZEN | G99,
+    "quadruped_x0.5": FROZEN | G99,
 }
+# variants on another config: (config, shape scale s: every shape range shrunk toward the base
+# body, lo' = 1 - s(1 - lo), hi' = 1 + s(hi - 1); s = 0 is the base body alone)
+OTHER_CONFIGS: dict[str, tuple[str, float]] = {
+    "biped_base": ("configs/biped_lower.yaml", 0.0),
+    "biped_x0.5": ("configs/biped_lower.yaml", 0.5),
+    "quadruped_x0.5": ("configs/quadruped.yaml", 0.5),
+}
+
+
+def variant_config(variant: str, seed: int) -> tuple[str, dict]:
+    """The config file and the overrides of a variant (the shape ranges of other configs' ones)."""
+    config, scale = OTHER_CONFIGS.get(variant, (CONFIG, 1.0))
+    overrides = {
+        k: ROOT / v.format(seed=seed) if k == "train.init_from" else v
+        for k, v in VARIANTS[variant].items()
+    }
+    if scale != 1.0:
+        from normalization import shrunk_shape_ranges
+
+        character = Path(config).stem
+        overrides |= shrunk_shape_ranges(character, scale)
+    return config, overrides
 
 
 def _report_path(variant: str, seed: int, steps: int) -> Path:
     return RESULTS / f"study_{variant}_s{seed}_{steps / 1e6:g}M.json"
 
 
-def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
+def run(variant: str, seed: int, steps: int) -> dict:
     """Train (or continue) one variant and seed to `steps` env steps, then evaluate."""
     warnings.filterwarnings("ignore")
     from paramimic.config import load_config
@@ -86,10 +113,7 @@ def run(variant: str, seed: int, steps: int, config: str = CONFIG) -> dict:
     from services.learner.trainer import SerialBackend, Trainer
 
     run_dir = RUNS / f"{variant}_s{seed}"
-    variant_overrides = {
-        k: ROOT / v.format(seed=seed) if k == "train.init_from" else v
-        for k, v in VARIANTS[variant].items()
-    }
+    config, variant_overrides = variant_config(variant, seed)
     overrides = variant_overrides | {
         "train.run_dir": str(run_dir),
         "train.seed": seed,
@@ -164,6 +188,7 @@ def merge() -> dict:
     for (variant, millions), runs in sorted(groups.items()):
         table[f"{variant}@{millions}M"] = {
             "seeds": [r["seed"] for r in runs],
+            "config": runs[0]["config"],
             "overrides": VARIANTS.get(variant, runs[0]["overrides"]),
             "fall_percent": _spread([r["fall_percent"] for r in runs]),
             "mean_return": _spread([r["mean_return"] for r in runs]),
@@ -198,7 +223,7 @@ def _plot(groups: dict) -> None:
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    variants = sorted({v for v, _ in groups})
+    variants = sorted({v for v, _ in groups if v not in OTHER_CONFIGS})
     for i, variant in enumerate(variants):
         runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
         for j, r in enumerate(runs):
