@@ -33,7 +33,7 @@ def _registry():
 
 
 class Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 class RewardConfig(Section):
@@ -309,8 +309,17 @@ class ActorsConfig(Section):
 
 class TrainConfig(Section):
     total_steps: int = Field(2_000_000, ge=1, description="environment steps to train for")
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
+    keep_checkpoints: int | None = Field(
+        5, ge=1, description="ckpt_*.pt files kept (older ones are pruned); null: keep all"
+    )
+    max_bad_updates: int = Field(
+        3,
+        ge=1,
+        description="updates in a row with non-finite losses or gradients (their steps are "
+        "skipped) before the run stops with a checkpoint of the last finite weights",
+    )
     run_dir: Path | None = Field(None, description="default: runs/<config name>")
     init_from: Path | None = Field(
         None,
@@ -396,6 +405,7 @@ class ExperimentConfig(Section):
         registration = _registry().registration(self.character)
         character = registration.character
         allowed = set(character.param_names()) | set(TASK_GOALS)
+        shape_ranges = {p.name: (p.low, p.high) for p in character.shape_params}
         for name, (lo, hi) in self.task.items():
             if name not in allowed:
                 raise ValueError(
@@ -408,6 +418,13 @@ class ExperimentConfig(Section):
                 continue
             if lo <= 0:
                 raise ValueError(f"task.{name}: scales must be positive, got min {lo}")
+            if name in shape_ranges:
+                low, high = shape_ranges[name]
+                if lo < low or hi > high:
+                    raise ValueError(
+                        f"task.{name}: [{lo}, {hi}] leaves the range {self.character!r} "
+                        f"supports, [{low}, {high}]"
+                    )
         clip = self.env.clip
         if clip is not None and clip not in registration.clips:
             owners = _registry().clip_owners()
@@ -493,3 +510,41 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Ex
         return ExperimentConfig.model_validate(raw)
     except ValidationError as e:
         raise ConfigError(f"{path}: {format_validation_error(e)}") from e
+
+
+# What a resumed run cannot change: the body and task space, the env (observations, rewards,
+# rates) and the networks' shapes; anything else (budget, actors, step sizes, k) may change.
+RESUME_FIXED = (
+    "character",
+    "task",
+    "shape_space",
+    "env",
+    "ppo.hidden_sizes",
+    "ppo.learn_std",
+    "curriculum.marginal_hidden",
+    "curriculum.skill.p_hidden",
+)
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and k != "task":
+            out |= _flat(v, key + ".")
+        else:
+            out[key] = v
+    return out
+
+
+def resume_conflicts(saved: dict, cfg: ExperimentConfig) -> list[str]:
+    """Fields where `cfg` differs from a checkpoint's config (`saved`, as dumped) in a way a
+    resumed run cannot accept (RESUME_FIXED), as 'field: saved -> given'."""
+    old = _flat(ExperimentConfig.model_validate(saved).model_dump(mode="json"))
+    new = _flat(cfg.model_dump(mode="json"))
+    return [
+        f"{key}: {old.get(key)!r} -> {new.get(key)!r}"
+        for key in sorted(old.keys() | new.keys())
+        if old.get(key) != new.get(key)
+        and any(key == f or key.startswith(f + ".") for f in RESUME_FIXED)
+    ]

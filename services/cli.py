@@ -257,7 +257,7 @@ def _load_policy(run: Path, seconds: float | None = None):
 
     try:
         state = checkpoint.load(run)
-    except FileNotFoundError as e:
+    except (FileNotFoundError, checkpoint.CheckpointError) as e:
         _fail(str(e))
     cfg = ExperimentConfig.model_validate(state["config"])
     if seconds is not None:
@@ -342,6 +342,21 @@ def render(
         frames = render_family(act, maker, tasks, seconds, width, height, seed)
     path = write_animation(frames, out, fps=1.0 / env.dt)
     console.print(f"wrote {path} ({len(frames)} frames, {frames[0].shape[1]}x{frames[0].shape[0]})")
+
+
+@app.command("upgrade-checkpoint")
+def upgrade_checkpoint(
+    path: Annotated[Path, typer.Argument(help="a checkpoint file or run directory you trust")],
+) -> None:
+    """Rewrite a checkpoint of paramimic before Part 10 (pickled numpy) as plain data, in place.
+
+    It unpickles the file once, which can run code: only for files you made yourself."""
+    from services.learner import checkpoint
+
+    try:
+        console.print(f"upgraded {checkpoint.upgrade(path)}")
+    except FileNotFoundError as e:
+        _fail(str(e))
 
 
 if __name__ == "__main__":

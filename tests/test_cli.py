@@ -62,6 +62,16 @@ def test_train_then_eval_writes_json(tmp_path):
     assert "resumed at iteration 2" in res.stdout
     assert json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])["iteration"] == 3
 
+    # a resume that would change the body or the env is refused, naming the fields
+    changed = TINY | {"task": TINY["task"] | {"leg_length": [0.7, 1.2]}}
+    changed |= {"env": {"max_episode_seconds": 3.0}}
+    cfg.write_text(yaml.safe_dump(changed))
+    res = _cli("train", cfg, "--serial", "--run-dir", run, "--resume", "--total-steps", 1024)
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "env.max_episode_seconds: 2.0 -> 3.0" in res.stdout + res.stderr
+    assert "task" in res.stdout + res.stderr
+    assert len((run / "metrics.jsonl").read_text().splitlines()) == 3  # nothing ran
+
 
 def test_resume_if_exists_starts_a_new_run_then_continues_it(tmp_path):
     """What the compose learner runs on every (re)start."""

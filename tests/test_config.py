@@ -56,6 +56,12 @@ def _write(tmp_path, text):
         ("env: {physics_hz: 200}", "env", "physics_hz (200) must be a multiple of control_hz"),
         ("train: {torch_threads: 0}", "train.torch_threads", "must be >= 1 or 'auto'"),
         ("env: {physics_hz: 300, frame_skip: 20}", "env", "frame_skip 20 != physics_hz"),
+        # Part 10: no NaN/inf anywhere, shapes within what the character supports, seeds >= 0
+        ("ppo: {gamma: .nan}", "ppo.gamma", "finite number"),
+        ("curriculum: {k: .inf}", "curriculum.k", "finite number"),
+        ("task: {left_leg_length: [0.8, .inf]}", "task.left_leg_length", "finite number"),
+        ("task: {left_leg_length: [0.8, 2.5]}", "task.left_leg_length", "supports, [0.5, 1.5]"),
+        ("train: {seed: -1}", "train.seed", "greater than or equal to 0"),
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):

