@@ -9,6 +9,7 @@ transaction applied twice leaves the same state.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 
@@ -64,6 +65,24 @@ def connect(
     )
 
 
+def finite(value):
+    """`value` with every NaN/±inf float (Python or numpy, at any depth) replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, str):  # numpy arrays and scalars
+        return finite(value.tolist())
+    return value
+
+
+def dumps(value) -> str:
+    """JSON for Redis and the API: standard JSON only, non-finite numbers stored as null."""
+    return json.dumps(finite(value), allow_nan=False)
+
+
 def add_event(
     pipe: redis.client.Pipeline | redis.Redis,
     keys: RunKeys,
@@ -77,7 +96,7 @@ def add_event(
         {
             "type": kind,
             "message": message,
-            "data": json.dumps(data or {}),
+            "data": dumps(data or {}),
             "time": f"{time.time():.3f}",
         },
         maxlen=EVENTS_LIMIT,

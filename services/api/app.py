@@ -2,21 +2,86 @@
 
 from __future__ import annotations
 
+import json
 from contextlib import asynccontextmanager
 
 import redis.asyncio as aioredis
 import uvicorn
 from fastapi import FastAPI, Request
+from fastapi.exceptions import ResponseValidationError
 from fastapi.responses import JSONResponse
+from pydantic import ValidationError
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
 
 from services.api.routes import router
 from services.api.settings import Settings
 
+MAX_BODY = 4096  # bytes: the largest mutating request (PUT k) is ~20
+RETRY_AFTER = "5"  # seconds, on 503
+
 
 async def redis_unavailable(request: Request, exc: Exception) -> JSONResponse:
-    return JSONResponse({"detail": f"Redis is unavailable: {exc}"}, status_code=503)
+    """503 with Retry-After; the message names no internal host or port."""
+    return JSONResponse(
+        {"detail": f"the run store (Redis) is unavailable ({type(exc).__name__}); retry later"},
+        status_code=503,
+        headers={"Retry-After": RETRY_AFTER},
+    )
+
+
+async def damaged_state(request: Request, exc: Exception) -> JSONResponse:
+    """Stored JSON that does not parse or lacks what it should hold: a clear answer, not a 500."""
+    return JSONResponse(
+        {
+            "detail": f"the stored state behind {request.url.path} is damaged and cannot be read "
+            f"({type(exc).__name__}: {str(exc)[:200]})"
+        },  # fmt: skip
+        status_code=409,
+    )
+
+
+class BodyLimit:
+    """ASGI middleware: a mutating request whose body exceeds `limit` bytes gets 413 before
+    anything parses it (by Content-Length, or counted as a chunked body streams in)."""
+
+    def __init__(self, app, limit: int = MAX_BODY) -> None:
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
+            await self.app(scope, receive, send)
+            return
+        length = dict(scope["headers"]).get(b"content-length")
+        if length is not None and (not length.isdigit() or int(length) > self.limit):
+            await self._too_large(send)
+            return
+        body, more = b"", True
+        while more:  # read the whole (bounded) body first, then replay it to the app
+            message = await receive()
+            if message["type"] != "http.request":
+                break
+            body += message.get("body", b"")
+            more = message.get("more_body", False)
+            if len(body) > self.limit:
+                await self._too_large(send)
+                return
+        replayed = False
+
+        async def replay():
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+    async def _too_large(self, send) -> None:
+        response = JSONResponse(
+            {"detail": f"request body over {self.limit} bytes"}, status_code=413
+        )
+        await response({"type": "http"}, None, send)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -39,6 +104,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(router)
     for error in (RedisConnectionError, RedisTimeoutError):
         app.add_exception_handler(error, redis_unavailable)
+    damaged = (json.JSONDecodeError, KeyError, TypeError, ValidationError, ResponseValidationError)
+    for error in damaged:
+        app.add_exception_handler(error, damaged_state)
+    app.add_middleware(BodyLimit)
     return app
 
 

@@ -8,9 +8,10 @@ import secrets
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from redis.asyncio import Redis
+from starlette.concurrency import run_in_threadpool
 
 from paramimic.curriculum.elite_set import EliteSet
 from paramimic.task_space import TaskSpace
@@ -42,6 +43,7 @@ RedisDep = Annotated[Redis, Depends(get_redis)]
 RunId = Annotated[str, Path(pattern=RUN_ID.pattern, description="run id, as listed by /runs")]
 STREAM_ID = r"^(0|[0-9]{1,19}-[0-9]{1,19})$"  # fits Redis' 64-bit stream id parts
 
+RUNS_PAGE_MAX = 1000
 META_FIELDS = ("name", "character", "status", "started_at", "updated_at", "total_steps")
 
 router = APIRouter()
@@ -98,9 +100,15 @@ async def health(r: RedisDep):
 
 
 @router.get("/runs", response_model=list[RunSummary], tags=["runs"])
-async def list_runs(r: RedisDep):
-    """All runs, newest first."""
-    ids = await r.zrevrange(RUNS, 0, -1)
+async def list_runs(
+    r: RedisDep,
+    response: Response,
+    offset: Annotated[int, Query(ge=0, le=10**9, description="runs to skip")] = 0,
+    limit: Annotated[int, Query(ge=1, le=RUNS_PAGE_MAX, description="runs per page")] = 100,
+):
+    """Runs, newest first, a page at a time (`X-Total-Count` holds how many there are)."""
+    response.headers["X-Total-Count"] = str(await r.zcard(RUNS))
+    ids = await r.zrevrange(RUNS, offset, offset + limit - 1)
     pipe = r.pipeline(transaction=False)
     for run in ids:
         keys = RunKeys(run)
@@ -172,7 +180,7 @@ async def history(
 ):
     keys, _ = await run_status(r, run)
     raw = await r.zrangebyscore(keys.history, f"({since}", "+inf", start=0, num=limit)
-    items = [json.loads(x) for x in raw]
+    items = await run_in_threadpool(lambda: [json.loads(x) for x in raw])  # off the event loop
     return HistoryPage(
         run_id=run, items=items, next_since=items[-1]["iteration"] if items else since
     )
@@ -248,6 +256,11 @@ async def elites(
     """The elite set ([L21] §5.2): all, those within the box [low, high], or the k nearest to
     a point (distance on the task box normalized per dimension), with their fitness."""
     _, summary, table = await _skill_state(r, run, "elites")
+    # building the k-d tree and querying it is CPU work: a worker thread, not the event loop
+    return await run_in_threadpool(_elites, run, summary, table, near, k, low, high, limit)
+
+
+def _elites(run, summary, table, near, k, low, high, limit) -> Elites:
     space = TaskSpace.from_ranges(summary["task_ranges"])
     elites = EliteSet(space.dim, space.metric)  # distances on the normalized box
     elites.from_state(table or {"params": [], "fitness": [], "keys": []})

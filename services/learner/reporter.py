@@ -3,15 +3,13 @@ and what it reads back: the run's control requests (pause, resume, k) made throu
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from pathlib import Path
 
 from paramimic.characters import registration
 from paramimic.config import ExperimentConfig
 from services.keys import HISTORY_LIMIT, RUNS, RunKeys
-from services.store import add_event, connect
+from services.store import add_event, connect, dumps, finite
 
 PROGRESS_FIELDS = (
     "iteration",
@@ -23,13 +21,6 @@ PROGRESS_FIELDS = (
     "actors",
     "nodes",
 )
-
-
-def _finite(v):
-    """JSON has no NaN/inf: they become null."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
 
 
 class RunReporter:
@@ -48,8 +39,8 @@ class RunReporter:
         meta = {
             "name": cfg.name,
             "character": cfg.character,
-            "character_info": json.dumps(registration(cfg.character).info()),
-            "config": json.dumps(cfg.model_dump(mode="json")),
+            "character_info": dumps(registration(cfg.character).info()),
+            "config": dumps(cfg.model_dump(mode="json")),
             "status": "running",
             "run_dir": str(run_dir.resolve()),
             "total_steps": total_steps,
@@ -70,14 +61,14 @@ class RunReporter:
         """Progress and one history record per iteration, in one transaction. A resumed run
         overwrites the records after its checkpoint."""
         keys, it = self.keys, int(m["iteration"])
-        record = {k: _finite(v) for k, v in m.items()}
-        fields = {k: json.dumps(record.get(k)) for k in PROGRESS_FIELDS}
-        fields["updated_at"] = json.dumps(time.time())
+        record = finite(m)  # JSON has no NaN/inf: they become null
+        fields = {k: dumps(record.get(k)) for k in PROGRESS_FIELDS}
+        fields["updated_at"] = dumps(time.time())
         pipe = self.redis.pipeline(transaction=True)
         pipe.hset(keys.progress, mapping=fields)
         pipe.hset(keys.meta, "updated_at", time.time())
         pipe.zremrangebyscore(keys.history, it, "+inf")
-        pipe.zadd(keys.history, {json.dumps(record): it})
+        pipe.zadd(keys.history, {dumps(record): it})
         pipe.zremrangebyrank(keys.history, 0, -HISTORY_LIMIT - 1)
         restarts = int(m.get("actor_restarts", 0))
         if restarts > self.restarts_seen:

@@ -25,7 +25,7 @@ from paramimic.config import ExperimentConfig
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.rl.numpy_mlp import Layers
 from services.keys import SAMPLES_LIMIT, RunKeys
-from services.store import add_event, connect
+from services.store import add_event, connect, dumps
 
 RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
 GRID_SIZE = 21  # points per display dimension of the V̄ and density snapshots
@@ -79,11 +79,11 @@ class SamplerService:
             self.rewrite_all = False
             wanted = self.parts if full else tuple(parts)
             state = self.curriculum.to_state([p for p in wanted if p != TRACES])
-            fields = {p: json.dumps(v) for p, v in state.items()}
-            fields["summary"] = json.dumps(self.curriculum.summary())
+            fields = {p: dumps(v) for p, v in state.items()}
+            fields["summary"] = dumps(self.curriculum.summary())
             fields["updated_at"] = f"{time.time():.3f}"
             if "marginal" in wanted:
-                fields["grid"] = json.dumps(self.curriculum.marginal_grid(GRID_SIZE))
+                fields["grid"] = dumps(self.curriculum.marginal_grid(GRID_SIZE))
             pipe = self.redis.pipeline(transaction=True)
             if self.skill:
                 self._write_skill(pipe, fields, full)
@@ -112,10 +112,10 @@ class SamplerService:
             pipe.hdel(self.keys.traces, *removed)
         if added:
             pipe.hset(
-                self.keys.traces, mapping={k: json.dumps(v.tolist()) for k, v in added.items()}
+                self.keys.traces, mapping={k: dumps(v.tolist()) for k, v in added.items()}
             )
         if full or added or removed:
-            fields["density"] = json.dumps(self.curriculum.density_grid(GRID_SIZE))
+            fields["density"] = dumps(self.curriculum.density_grid(GRID_SIZE))
 
     # --- the curriculum's calls ---------------------------------------------------------------
 
@@ -127,7 +127,7 @@ class SamplerService:
         """The tasks of the episodes about to start, [n, d], as a deal ([L21]: with the
         motions m_a to imitate, the batch and its region)."""
         deal = self.curriculum.next_deal(int(n))
-        entry = json.dumps(
+        entry = dumps(
             {
                 "time": time.time(),
                 "source": source,

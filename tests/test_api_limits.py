@@ -1,0 +1,109 @@
+"""Part 10: the API can't be starved or confused by one client or by damaged state — a real
+uvicorn (`paramimic api`) over its own real Redis server."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import httpx
+import pytest
+import redis
+
+from paramimic.config import ExperimentConfig
+from services.keys import RunKeys
+from services.launch.api_process import ApiProcess
+from services.launch.processes import free_port
+from services.launch.redis_server import EmbeddedRedis
+from services.learner.reporter import RunReporter
+
+TOKEN = "limits-test-token"
+CFG = {"name": "limits", "character": "hopper", "task": {"leg_length": [0.8, 1.2]}}
+
+
+@pytest.fixture
+def stack(tmp_path):
+    server = EmbeddedRedis(tmp_path / "redis")
+    server.start()
+    api = ApiProcess(server.url, "127.0.0.1", free_port(), TOKEN, tmp_path / "api.log")
+    api.start()
+    yield server, api.url
+    api.stop()
+    server.stop()
+
+
+def _start_run(url: str, run_id: str, tmp_path) -> RunReporter:
+    reporter = RunReporter(url, run_id)
+    reporter.start(ExperimentConfig.model_validate(CFG), tmp_path, 1000, None)
+    return reporter
+
+
+def test_oversized_bodies_get_413_before_parsing(stack, tmp_path):
+    server, url = stack
+    _start_run(server.url, "big-body", tmp_path)
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    put = f"{url}/runs/big-body/curriculum/k"
+    assert httpx.put(put, json={"k": 3}, headers=auth).status_code == 202
+    padded = json.dumps({"k": 3, "pad": "x" * 100_000})
+    r = httpx.put(put, content=padded, headers=auth | {"Content-Type": "application/json"})
+    assert r.status_code == 413 and "4096 bytes" in r.json()["detail"]
+
+    def chunks():  # no Content-Length: counted as it streams
+        for _ in range(100):
+            yield b"x" * 1000
+
+    r = httpx.put(put, content=chunks(), headers=auth | {"Content-Type": "application/json"})
+    assert r.status_code == 413
+
+
+def test_runs_are_paginated(stack, tmp_path):
+    server, url = stack
+    for i in range(5):
+        _start_run(server.url, f"page-run-{i}", tmp_path)
+    r = httpx.get(f"{url}/runs", params={"limit": 2})
+    assert r.headers["X-Total-Count"] == "5"
+    first = [x["run_id"] for x in r.json()]
+    second = [x["run_id"] for x in httpx.get(f"{url}/runs?offset=2&limit=2").json()]
+    last = [x["run_id"] for x in httpx.get(f"{url}/runs?offset=4&limit=2").json()]
+    assert len(first) == 2 and len(second) == 2 and len(last) == 1
+    assert sorted(first + second + last) == [f"page-run-{i}" for i in range(5)]
+    assert httpx.get(f"{url}/runs?limit=100000").status_code == 422
+
+
+def test_nan_metrics_are_stored_and_served_as_null(stack, tmp_path):
+    server, url = stack
+    reporter = _start_run(server.url, "nan-run", tmp_path)
+    metrics = {"iteration": 1, "env_steps": 10, "mean_return": float("nan")}
+    reporter.progress(metrics | {"fall_percent": float("inf"), "kl": float("-inf")})
+    raw = redis.Redis.from_url(server.url).zrange(RunKeys("nan-run").history, 0, -1)[0].decode()
+    assert "NaN" not in raw and "Infinity" not in raw
+    assert json.loads(raw)["mean_return"] is None
+    r = httpx.get(f"{url}/runs/nan-run/history")
+    assert r.status_code == 200 and "NaN" not in r.text
+    assert r.json()["items"][0]["fall_percent"] is None
+    assert httpx.get(f"{url}/runs/nan-run/progress").json()["mean_return"] is None
+
+
+def test_damaged_stored_json_gets_a_clear_answer_not_a_5xx(stack, tmp_path):
+    server, url = stack
+    reporter = _start_run(server.url, "damaged-run", tmp_path)
+    reporter.progress({"iteration": 1, "env_steps": 10, "mean_return": 1.0})
+    client = redis.Redis.from_url(server.url)
+    keys = RunKeys("damaged-run")
+    client.zadd(keys.history, {"{not json": 2})
+    client.hset(keys.progress, "env_steps", "[[[")
+    client.hset(keys.curriculum, "summary", '{"task_ranges": {"a": ')
+    for path in ("history", "progress", "curriculum", "curriculum/elites"):
+        r = httpx.get(f"{url}/runs/damaged-run/{path}")
+        assert r.status_code < 500, (path, r.status_code, r.text)
+        assert "damaged" in r.json()["detail"], (path, r.text)
+
+
+def test_redis_down_is_503_with_retry_after_and_no_address(stack):
+    server, url = stack
+    server.kill()
+    r = httpx.get(f"{url}/runs", timeout=30)
+    assert r.status_code == 503 and r.headers["Retry-After"].isdigit()
+    body = r.text
+    assert str(server.port) not in body and "127.0.0.1" not in body
+    assert socket.gethostname() not in body
