@@ -17,6 +17,8 @@ paramimic:run:{run}:seen              set: ingested episode ids (idempotent inge
 paramimic:run:{run}:samples           list: the latest task batches (JSON), newest first
 paramimic:run:{run}:events            stream: type, message, data (JSON), time
 paramimic:run:{run}:control           hash: paused (0/1), k (requested uniformity)
+paramimic:run:{run}:lease             string: the owning learner (host:pid:nonce), with a TTL
+                                      its heartbeat renews; gone = the learner is gone
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ RAY_NAMESPACE = "paramimic"
 HISTORY_LIMIT = 10_000  # iterations kept in the history
 SAMPLES_LIMIT = 100  # task batches kept
 EVENTS_LIMIT = 10_000  # events kept (approximately: MAXLEN ~)
+LEASE_SECONDS = 15  # a learner that stops renewing its lease for this long is gone ("stale")
 
 RUN_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 
@@ -51,6 +54,7 @@ class RunKeys:
         self.samples = f"{base}:samples"
         self.events = f"{base}:events"
         self.control = f"{base}:control"
+        self.lease = f"{base}:lease"
 
 
 def sampler_actor_name(run_id: str) -> str:

@@ -304,3 +304,60 @@ def test_an_external_redis_with_a_password_is_used_and_left_running(tmp_path):
         )  # fmt: skip
         assert res.returncode == 2 and "cannot use Redis at redis://:***@" in res.stdout
         assert "wrong" not in res.stdout and not (tmp_path / "other").exists()
+
+
+def test_a_run_has_one_owner_and_a_killed_launcher_takes_its_children(
+    tmp_path, api_url, redis_server
+):
+    """Part 10 item 8: a second learner on the run dir is refused; SIGKILL of the launcher takes
+    the embedded Redis and the API with it (PDEATHSIG), so --resume starts cleanly; a learner
+    that stops renewing its lease shows as `stale`."""
+    launch = Launch(tmp_path)
+    try:
+        url = launch.api_url()
+        wait_until(lambda: (launch.run_dir / "checkpoints" / "latest.pt").exists(), 180, "ckpt")
+        second = Launch(tmp_path, "--resume")
+        assert second.wait(120) == 2, second.output()
+        assert "in use by another learner" in second.output()
+        children = {
+            p: name
+            for p, name in launch.descendants.items()
+            if name == "redis-server" or "services.cli" in " ".join(_cmdline(p))
+        }
+        assert "redis-server" in children.values() and len(children) == 2, children
+        launch.proc.kill()
+        launch.proc.wait(30)
+        wait_until(lambda: not any(_alive(p) for p in children), 15, "Redis and API to exit")
+        with pytest.raises(httpx.ConnectError):
+            httpx.get(f"{url}/health", timeout=2.0)
+    finally:
+        if launch.proc.poll() is None:
+            launch.proc.kill()
+    again = Launch(tmp_path, "--resume", "--no-api", "--total-steps", "1024")
+    assert again.wait() == 0, again.output()
+    assert "resumed at iteration" in again.output()
+    assert again.leftovers() == []
+
+    # the lease: a learner killed with SIGKILL stops renewing it and its run turns stale
+    code = (
+        "import os, sys, signal; from paramimic.config import ExperimentConfig;"
+        "from services.learner.reporter import RunReporter;"
+        "r = RunReporter(sys.argv[1], 'lease-run'); r.acquire(lease_seconds=2);"
+        "r.start(ExperimentConfig.model_validate({'character': 'hopper'}), __import__('pathlib')"
+        ".Path('.'), 10, None); print('owned', flush=True); os.kill(os.getpid(), signal.SIGKILL)"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code, redis_server.url], capture_output=True, text=True
+    )
+    assert "owned" in res.stdout, res.stderr
+    wait_until(
+        lambda: httpx.get(f"{api_url}/runs/lease-run/progress").json()["status"] == "stale",
+        30, "the killed learner's run to show as stale",
+    )  # fmt: skip
+
+
+def _cmdline(p: psutil.Process) -> list[str]:
+    try:
+        return p.cmdline()
+    except psutil.NoSuchProcess:
+        return []

@@ -16,7 +16,10 @@ class RunSummary(BaseModel):
     run_id: str
     name: str
     character: str
-    status: str = Field(description="running, paused, finished, stopped or failed")
+    status: str = Field(
+        description="running, paused, finished, stopped, failed, or stale (running or paused, "
+        "but its learner stopped renewing its lease: killed or its host lost)"
+    )
     started_at: float
     updated_at: float
     iteration: int | None = None

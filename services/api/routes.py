@@ -86,6 +86,12 @@ async def run_status(r: Redis, run: str) -> tuple[RunKeys, str]:
     return keys, state
 
 
+def live_status(stored: str, lease: int) -> str:
+    """A run stored as running or paused whose learner stopped renewing its lease (killed,
+    host lost) is `stale`."""
+    return "stale" if stored in ("running", "paused") and not lease else stored
+
+
 def _num(value: str | None, kind=float):
     if value is None:
         return None
@@ -114,12 +120,16 @@ async def list_runs(
         keys = RunKeys(run)
         pipe.hmget(keys.meta, list(META_FIELDS))
         pipe.hmget(keys.progress, ["iteration", "env_steps"])
+        pipe.exists(keys.lease)
     replies = await pipe.execute()
     runs = []
-    for run, values, (iteration, env_steps) in zip(ids, replies[::2], replies[1::2], strict=True):
+    for run, values, (iteration, env_steps), lease in zip(
+        ids, replies[::3], replies[1::3], replies[2::3], strict=True
+    ):
         meta = {k: v for k, v in zip(META_FIELDS, values, strict=True) if v is not None}
         if "status" not in meta:
             continue
+        meta["status"] = live_status(meta["status"], lease)
         runs.append(
             RunSummary(
                 run_id=run,
@@ -152,12 +162,13 @@ async def progress(run: RunId, r: RedisDep):
     pipe = r.pipeline(transaction=False)  # one round trip
     pipe.hmget(keys.meta, ["status", "total_steps"])
     pipe.hgetall(keys.progress)
-    (state, total_steps), p = await pipe.execute()
+    pipe.exists(keys.lease)
+    (state, total_steps), p, lease = await pipe.execute()
     if state is None:
         raise _not_found(run)
     return Progress(
         run_id=run,
-        status=state,
+        status=live_status(state, lease),
         iteration=_num(p.get("iteration"), int) or 0,
         env_steps=_num(p.get("env_steps"), int) or 0,
         total_steps=_num(total_steps, int),

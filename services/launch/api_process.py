@@ -10,7 +10,7 @@ from pathlib import Path
 
 import httpx
 
-from services.launch.processes import stop_process
+from services.launch.processes import die_with_parent, stop_process
 
 
 class ApiProcess:
@@ -47,6 +47,7 @@ class ApiProcess:
                 stdout=log,
                 stderr=subprocess.STDOUT,
                 start_new_session=True,  # Ctrl-C reaches the launcher, which stops this
+                preexec_fn=die_with_parent(),  # and it dies with the launcher
             )
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

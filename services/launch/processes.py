@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import ctypes
+import os
 import signal
 import socket
 import subprocess
@@ -33,3 +35,20 @@ def stop_process(process: subprocess.Popen | None, timeout: float = 10.0) -> Non
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait()
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(sig: int = signal.SIGTERM):
+    """A `preexec_fn` for Popen: the child gets `sig` when the process that started it dies,
+    even by SIGKILL (Linux PR_SET_PDEATHSIG), so that no embedded Redis or API outlives its
+    launcher. SIGTERM lets Redis fsync its AOF on the way out."""
+    parent = os.getpid()
+
+    def arm() -> None:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+        if os.getppid() != parent:  # the launcher died before the signal was armed
+            os.kill(os.getpid(), sig)
+
+    return arm

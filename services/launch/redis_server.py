@@ -14,7 +14,7 @@ from pathlib import Path
 
 import redis
 
-from services.launch.processes import free_port, stop_process
+from services.launch.processes import die_with_parent, free_port, stop_process
 
 
 def redis_server_binary() -> str:
@@ -78,6 +78,7 @@ class EmbeddedRedis:
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
                 start_new_session=True,  # Ctrl-C in the terminal reaches the launcher only
+                preexec_fn=die_with_parent(),  # and it dies with the launcher
             )
             if _serving(process, port, self.password, timeout):
                 self.process, self.port = process, port

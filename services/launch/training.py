@@ -8,6 +8,7 @@ rollout worker in this process with an in-process curriculum (no Ray, Redis or A
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import signal
@@ -117,6 +118,7 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
     if not opts.serial and opts.redis_url is not None:
         check_redis(opts.redis_url)
     run_dir.mkdir(parents=True, exist_ok=True)
+    lock = lock_run_dir(run_dir)  # held until this process exits, however it exits
     (run_dir / "config.yaml").write_text(
         yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
     )
@@ -131,7 +133,31 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)
+        lock.close()
         console.print(f"checkpoint: {run_dir / 'checkpoints' / checkpoint.LATEST}")
+
+
+LOCK_FILE = ".lock"
+
+
+def lock_run_dir(run_dir: Path):
+    """An exclusive flock on the run directory: one learner per run dir. The kernel drops it
+    when the process dies, even by SIGKILL. Returns the open lock file (close to release)."""
+    f = (run_dir / LOCK_FILE).open("a+")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.seek(0)
+        holder = f.read().strip() or "unknown"
+        f.close()
+        raise LaunchError(
+            f"{run_dir} is in use by another learner (pid {holder}); stop it first"
+        ) from None
+    f.seek(0)
+    f.truncate()
+    f.write(f"{os.getpid()}\n")
+    f.flush()
+    return f
 
 
 @dataclass
@@ -171,7 +197,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     from services.launch.stack import ray_stack
     from services.learner.cluster import connect
     from services.learner.ray_backend import AllActorsLost
-    from services.learner.reporter import RunReporter
+    from services.learner.reporter import RunOwned, RunReporter
 
     cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
     redis_url = opts.redis_url
@@ -184,6 +210,11 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         services.callback(ray.shutdown)
     run_id = run_id_for(run_dir, cfg, opts.resume)
     reporter = RunReporter(redis_url, run_id)
+    try:
+        reporter.acquire()  # one learner per run id, also across machines sharing the Redis
+    except RunOwned as e:
+        raise LaunchError(str(e)) from e
+    services.callback(reporter.release)
     stack = services.enter_context(ray_stack(cfg, run_dir, redis_url, run_id))
     trainer, backend = stack.trainer, stack.backend
     if state is not None:

@@ -3,12 +3,16 @@ and what it reads back: the run's control requests (pause, resume, k) made throu
 
 from __future__ import annotations
 
+import os
+import secrets
+import socket
+import threading
 import time
 from pathlib import Path
 
 from paramimic.characters import registration
 from paramimic.config import ExperimentConfig
-from services.keys import HISTORY_LIMIT, RUNS, RunKeys
+from services.keys import HISTORY_LIMIT, LEASE_SECONDS, RUNS, RunKeys
 from services.store import add_event, connect, dumps, finite
 
 PROGRESS_FIELDS = (
@@ -23,16 +27,79 @@ PROGRESS_FIELDS = (
 )
 
 
+class RunOwned(RuntimeError):
+    """Another learner holds the run's lease."""
+
+
+# renew the lease only if it is still ours (another learner may have taken an expired one)
+_RENEW = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('expire', KEYS[1], ARGV[2]) else return 0 end"  # noqa: E501
+_RELEASE = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end"  # noqa: E501
+
+
+def _dead_here(owner: str) -> bool:
+    """Whether a lease owner 'host:pid:nonce' was a process of this machine that is gone."""
+    host, _, rest = owner.partition(":")
+    pid = rest.partition(":")[0]
+    if host != socket.gethostname() or not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # alive, another user's
+        return False
+    return False
+
+
 class RunReporter:
     def __init__(self, redis_url: str, run_id: str, retry_seconds: float = 120.0) -> None:
         self.keys = RunKeys(run_id)
         self.redis = connect(redis_url, retry_seconds)
         self.restarts_seen = 0
+        self.owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
+        self._heartbeat: threading.Event | None = None
+
+    def acquire(self, lease_seconds: int = LEASE_SECONDS) -> None:
+        """Own the run: its lease key, set only if no live learner holds it, renewed every
+        lease/3 s by a daemon thread until `release()`. RunOwned if another learner has it."""
+        if self._heartbeat is not None:
+            return
+        for _ in range(2):
+            if self.redis.set(self.keys.lease, self.owner, nx=True, ex=lease_seconds):
+                break
+            holder = self.redis.get(self.keys.lease) or ""
+            if _dead_here(holder):  # a learner of this machine killed without releasing
+                self.redis.eval(_RELEASE, 1, self.keys.lease, holder)
+                continue
+            ttl = self.redis.ttl(self.keys.lease)
+            raise RunOwned(
+                f"run {self.keys.run_id} is being trained by another learner ({holder}); its "
+                f"lease expires {ttl} s after that learner stops"
+            )
+        else:
+            raise RunOwned(f"run {self.keys.run_id}: could not take its lease")
+        stop = self._heartbeat = threading.Event()
+
+        def beat() -> None:
+            while not stop.wait(lease_seconds / 3):
+                try:
+                    self.redis.eval(_RENEW, 1, self.keys.lease, self.owner, lease_seconds)
+                except Exception:  # Redis away: the lease lapses, the run shows as stale
+                    continue
+
+        threading.Thread(target=beat, name="run-lease", daemon=True).start()
+
+    def release(self) -> None:
+        if self._heartbeat is not None:
+            self._heartbeat.set()
+            self._heartbeat = None
+            self.redis.eval(_RELEASE, 1, self.keys.lease, self.owner)
 
     def start(
         self, cfg: ExperimentConfig, run_dir: Path, total_steps: int, api_url: str | None
     ) -> None:
-        """Register the run (or mark a resumed one running again)."""
+        """Own the run (`acquire`) and register it (or mark a resumed one running again)."""
+        self.acquire()
         keys, now = self.keys, time.time()
         resumed = bool(self.redis.exists(keys.meta))
         pipe = self.redis.pipeline(transaction=True)

@@ -111,9 +111,7 @@ class SamplerService:
         elif removed:
             pipe.hdel(self.keys.traces, *removed)
         if added:
-            pipe.hset(
-                self.keys.traces, mapping={k: dumps(v.tolist()) for k, v in added.items()}
-            )
+            pipe.hset(self.keys.traces, mapping={k: dumps(v.tolist()) for k, v in added.items()})
         if full or added or removed:
             fields["density"] = dumps(self.curriculum.density_grid(GRID_SIZE))
 
