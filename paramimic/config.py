@@ -298,6 +298,22 @@ class ActorsConfig(Section):
     lost_timeout: PositiveFloat = Field(
         120.0, description="seconds without any live actor before the learner checkpoints and exits"
     )
+    fragment_timeout: PositiveFloat = Field(
+        300.0,
+        description="seconds a fragment may take; an actor past it is hung: killed, restarted by "
+        "Ray, its fragment dropped",
+    )
+    sampler_timeout: PositiveFloat = Field(
+        60.0,
+        description="seconds the learner and the actors wait for one answer of the sampler actor "
+        "(it is restarted by Ray and reloads from Redis meanwhile) before it counts as failed",
+    )
+    max_fragment_errors: int = Field(
+        20,
+        ge=1,
+        description="fragment errors in a row (no fragment arriving in between) that make a "
+        "persistent failure: the learner checkpoints and exits with the reason",
+    )
 
     @field_validator("num_actors")
     @classmethod

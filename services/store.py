@@ -1,7 +1,9 @@
 """Redis clients for the services: reconnect with backoff while a server restarts.
 
 A command that fails on a lost connection, a timeout or a server still loading its AOF is
-retried with exponential backoff for up to `retry_seconds`; after that the error propagates.
+retried with exponential backoff for up to `retry_seconds` of wall-clock time from its first
+attempt (an attempt in flight at the deadline may add up to one socket timeout, 10 s); after that
+the error propagates.
 Writes that the services retry are absolute (HSET, SADD, ZADD after a range delete), so a
 transaction applied twice leaves the same state.
 """
@@ -29,6 +31,36 @@ class RedisAuthFailed(redis.exceptions.RedisError):
 
 RETRYABLE = (RedisConnectionError, RedisTimeoutError, BusyLoadingError, TimeoutError)
 BACKOFF_CAP = 0.5  # seconds between attempts, at most
+SOCKET_TIMEOUT = 10.0  # seconds one command may take before it counts as failed
+
+
+class DeadlineRetry(Retry):
+    """redis-py's Retry with a wall-clock limit: a command is retried with backoff until
+    `seconds` have passed since its first attempt (the count of retries alone does not bound the
+    time when each attempt can wait for a socket timeout); then the last error propagates."""
+
+    def __init__(self, seconds: float) -> None:
+        super().__init__(
+            ExponentialBackoff(cap=BACKOFF_CAP, base=0.02), retries=-1, supported_errors=RETRYABLE
+        )
+        self.seconds = seconds
+
+    def call_with_retry(self, do, fail, is_retryable=None, with_failure_count=False):
+        deadline = time.monotonic() + self.seconds
+        self._backoff.reset()
+        failures = 0
+        while True:
+            try:
+                return do()
+            except self._supported_errors as error:
+                if is_retryable and not is_retryable(error):
+                    raise
+                failures += 1
+                fail(error, failures) if with_failure_count else fail(error)
+                pause = self._backoff.compute(failures)
+                if time.monotonic() + pause >= deadline:
+                    raise error
+                time.sleep(pause)
 
 
 def connect(
@@ -53,13 +85,9 @@ def connect(
     return redis.Redis.from_url(
         url,
         decode_responses=True,
-        socket_timeout=10.0,
+        socket_timeout=min(SOCKET_TIMEOUT, retry_seconds),
         socket_connect_timeout=2.0,
-        retry=Retry(
-            ExponentialBackoff(cap=BACKOFF_CAP, base=0.02),
-            retries=int(retry_seconds / BACKOFF_CAP) + 8,
-            supported_errors=RETRYABLE,
-        ),
+        retry=DeadlineRetry(retry_seconds),
         retry_on_error=list(RETRYABLE),
         redis_connect_func=connected,
     )

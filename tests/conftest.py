@@ -88,3 +88,22 @@ def wait_until(
 def wait_until_fixture():
     """`wait_until(predicate, timeout, what)` as a fixture."""
     return wait_until
+
+
+@pytest.fixture
+def distributed(local_ray, redis_server, run_id):
+    """make(cfg, run_dir, suffix="", spawn=None) -> (trainer, backend): a sampler actor (state in
+    the real Redis) and the rollout actors; everything made is stopped after the test."""
+    from contextlib import ExitStack
+
+    from services.launch.stack import ray_stack
+
+    with ExitStack() as made:
+
+        def make(cfg, run_dir, suffix="", actor_class=None):
+            stack = made.enter_context(
+                ray_stack(cfg, run_dir, redis_server.url, run_id + suffix, actor_class)
+            )
+            return stack.trainer, stack.backend
+
+        yield make

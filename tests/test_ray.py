@@ -3,7 +3,6 @@
 import os
 import signal
 import threading
-from contextlib import ExitStack
 
 import numpy as np
 import pytest
@@ -11,22 +10,8 @@ import ray
 from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
-from services.launch.stack import ray_stack
 from services.learner import checkpoint
 from services.learner.trainer import SerialBackend, Trainer
-
-
-@pytest.fixture
-def distributed(local_ray, redis_server, run_id):
-    """make(cfg, run_dir) -> (trainer, backend): a sampler actor (state in the real Redis) and
-    the rollout actors; everything made is stopped after the test."""
-    with ExitStack() as made:
-
-        def make(cfg: ExperimentConfig, run_dir, suffix=""):
-            stack = made.enter_context(ray_stack(cfg, run_dir, redis_server.url, run_id + suffix))
-            return stack.trainer, stack.backend
-
-        yield make
 
 
 def _cfg(**actors) -> ExperimentConfig:

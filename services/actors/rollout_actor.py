@@ -3,8 +3,9 @@
 It fetches the policy weights from the object store only when their version changes, asks the
 sampler for the tasks of the episodes that will start in the fragment, runs the fragment with the
 library's stepping loop, reports the finished episodes to the sampler and returns the fragment.
-A diverging simulation ends its episode inside the env; nothing here can kill the actor but the
-process dying.
+A diverging simulation ends its episode inside the env. Any other exception in `sample` (an env
+that raises, a sampler that does not answer: `SamplerUnavailable`) fails that call only; the
+learner drops the fragment, counts it under its reason and asks again.
 """
 
 from __future__ import annotations
@@ -14,11 +15,16 @@ import resource
 
 import numpy as np
 import ray
+from ray.exceptions import GetTimeoutError, RayActorError
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.rl.rollout import Fragment, RolloutWorker
 from services.keys import RAY_NAMESPACE
+
+
+class SamplerUnavailable(RuntimeError):
+    """The sampler actor did not answer a rollout actor within actors.sampler_timeout."""
 
 
 @ray.remote(num_cpus=1, max_restarts=-1)
@@ -37,6 +43,7 @@ class RolloutActor:
         # store, which a restarted actor cannot rely on)
         self.sampler = None if sampler is None else ray.get_actor(sampler, namespace=RAY_NAMESPACE)
         self.source = f"actor{worker_id}"
+        self.sampler_timeout = cfg.actors.sampler_timeout
         self.restarted = ray.get_runtime_context().was_current_actor_reconstructed
         if self.restarted:  # a restarted actor must not replay the episodes it already ran
             seed = int(np.random.SeedSequence([seed, os.getpid()]).generate_state(1)[0])
@@ -74,23 +81,34 @@ class RolloutActor:
         one-element list so that Ray does not fetch the (unchanged) weights on every call:
         they are read only when `version` is new."""
         if version != self.worker.policy_version:
-            self.worker.set_weights(ray.get(weights[0]), version)
+            self.worker.set_weights(ray.get(weights[0], timeout=self.sampler_timeout), version)
         if isinstance(tasks, int):
-            tasks = ray.get(self.sampler.next_deal.remote(tasks, self.source))
+            tasks = self._ask_sampler(self.sampler.next_deal.remote(tasks, self.source))
         fragment = self.worker.collect(num_steps, tasks, use_policy)
         if self.sampler is not None:  # acknowledged before the learner sees the fragment
-            ray.get(self.sampler.ingest.remote([e.to_dict() for e in fragment.episodes]))
+            episodes = [e.to_dict() for e in fragment.episodes]
+            self._ask_sampler(self.sampler.ingest.remote(episodes))
         return fragment
 
+    def _ask_sampler(self, ref: ray.ObjectRef):
+        """The sampler's answer within actors.sampler_timeout, else SamplerUnavailable (the
+        learner files the dropped fragment under the sampler, not under this actor)."""
+        try:
+            return ray.get(ref, timeout=self.sampler_timeout)
+        except (GetTimeoutError, RayActorError) as e:
+            raise SamplerUnavailable(f"the sampler did not answer: {type(e).__name__}") from None
 
-def spawner(cfg: ExperimentConfig, obs_dim: int, act_dim: int, sampler: str):
+
+def spawner(cfg: ExperimentConfig, obs_dim: int, act_dim: int, sampler: str, actor_class=None):
     """actor id i -> a started rollout actor (spread over the nodes) whose tasks come from the
-    named sampler actor; its seed follows from the run's seed and i."""
+    named sampler actor; its seed follows from the run's seed and i. `actor_class`: RolloutActor
+    or a Ray actor class derived from it."""
     config = cfg.model_dump(mode="json")
+    actor_class = actor_class or RolloutActor
 
     def spawn(i: int) -> ray.actor.ActorHandle:
         seed = cfg.train.seed + 1 + i
-        return RolloutActor.options(scheduling_strategy="SPREAD").remote(
+        return actor_class.options(scheduling_strategy="SPREAD").remote(
             config, obs_dim, act_dim, seed, i, sampler
         )
 

@@ -30,14 +30,18 @@ class RayStack:
 
 @contextmanager
 def ray_stack(
-    cfg: ExperimentConfig, run_dir: Path, redis_url: str, run_id: str
+    cfg: ExperimentConfig, run_dir: Path, redis_url: str, run_id: str, actor_class=None
 ) -> Iterator[RayStack]:
-    """Start the sampler and the rollout actors; kill them on exit."""
+    """Start the sampler and the rollout actors (`actor_class`: a Ray actor class with the
+    RolloutActor interface, default RolloutActor; the fault tests inject through it); kill
+    them on exit."""
     clip = None if cfg.env.clip is None else clip_setup(cfg)
     sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id, clip)
     try:
-        trainer = Trainer(cfg, run_dir, SamplerClient(sampler))
-        spawn = spawner(cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id))
+        trainer = Trainer(cfg, run_dir, SamplerClient(sampler, cfg.actors.sampler_timeout))
+        spawn = spawner(
+            cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id), actor_class
+        )
         backend = RayBackend(cfg, spawn)
         try:
             yield RayStack(trainer, backend, sampler, run_id)

@@ -89,7 +89,7 @@ def masked(url: str) -> str:
 
 def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -> int:
     """Train; returns the process exit code (0 done or stopped, 3 all rollout actors lost,
-    4 the updates diverged)."""
+    4 the updates diverged, 5 fragments keep failing or the sampler failed)."""
     run_dir = cfg.resolved_run_dir()
     if not opts.resume and (checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST).exists():
         raise LaunchError(f"{run_dir} already holds a run; pass --resume or another --run-dir")
@@ -196,7 +196,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     from services.launch.redis_server import EmbeddedRedis
     from services.launch.stack import ray_stack
     from services.learner.cluster import connect
-    from services.learner.ray_backend import AllActorsLost
+    from services.learner.ray_backend import AllActorsLost, FragmentsFailing, SamplerFailed
     from services.learner.reporter import RunOwned, RunReporter
 
     cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
@@ -217,6 +217,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     services.callback(reporter.release)
     stack = services.enter_context(ray_stack(cfg, run_dir, redis_url, run_id))
     trainer, backend = stack.trainer, stack.backend
+    backend.should_stop = lambda: stop.set  # SIGTERM is honoured while it waits for actors
     if state is not None:
         trainer.load_state_dict(state)  # the sampler takes the checkpoint's curriculum too
         _say_resumed(trainer, console)
@@ -279,6 +280,10 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     except TrainingDiverged as e:
         console.print(f"[bold red]stopped:[/] {e}; checkpoint saved")
         code = 4
+    except (FragmentsFailing, SamplerFailed) as e:
+        what = "sampler failed" if isinstance(e, SamplerFailed) else "rollouts keep failing"
+        console.print(f"[bold red]stopped ({what}):[/] {e}; checkpoint saved, fix and --resume")
+        code = 5
     finally:
         if code == 1 and stop.set:  # interrupted by a second Ctrl-C
             status = "stopped"

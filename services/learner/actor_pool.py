@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import ray
 from ray.exceptions import RayActorError
 
+READY_TIMEOUT = 30.0  # seconds for a ray.get of an object ray.wait reported ready
+
 NODE_CHECK_EVERY = 1.0  # seconds between looks at which nodes are alive while waiting
 
 Spawn = Callable[[int], ray.actor.ActorHandle]  # actor id -> a started rollout actor
@@ -96,7 +98,7 @@ class ActorPool:
         for ref in ready:
             i, handle = self.joining.pop(ref)
             try:
-                node_id, node_ip = ray.get(ref)
+                node_id, node_ip = ray.get(ref, timeout=READY_TIMEOUT)  # ready: at once
             except RayActorError:
                 continue  # died while starting; the next top-up replaces it
             self.members[i] = Member(handle, node_id, node_ip)
@@ -148,7 +150,7 @@ class ActorPool:
         return events
 
     def pids(self) -> list[int]:
-        return ray.get([m.handle.pid.remote() for m in self.members.values()])
+        return ray.get([m.handle.pid.remote() for m in self.members.values()], timeout=60)
 
     def close(self) -> None:
         for handle in self.handles + [h for _, h in self.joining.values()]:

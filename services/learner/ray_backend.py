@@ -17,60 +17,97 @@ nodes, is `ActorPool`'s business (`actor_pool.py`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 import ray
-from ray.exceptions import RayActorError
+from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayTaskError
 
 from paramimic.config import ExperimentConfig
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
-from services.learner.actor_pool import ActorPool, LostNode, Spawn, resolve_num_actors
+from services.actors.rollout_actor import SamplerUnavailable
+from services.learner.actor_pool import (
+    READY_TIMEOUT,
+    ActorPool,
+    LostNode,
+    Spawn,
+    resolve_num_actors,
+)
+from services.learner.trainer import StopRequested
 
 RETRY_PAUSE = 0.2  # seconds before asking a failed actor again
 
-__all__ = ["AllActorsLost", "RayBackend", "SamplerClient", "resolve_num_actors"]
+__all__ = [
+    "AllActorsLost",
+    "FragmentsFailing",
+    "RayBackend",
+    "SamplerClient",
+    "SamplerFailed",
+    "StopRequested",
+    "resolve_num_actors",
+]
 
 
 class AllActorsLost(RuntimeError):
     pass
 
 
-class SamplerClient:
-    """The learner's view of the sampler actor: the calls of a local curriculum."""
+class FragmentsFailing(RuntimeError):
+    """actors.max_fragment_errors fragment errors in a row: a persistent cause."""
 
-    def __init__(self, handle: ray.actor.ActorHandle) -> None:
+
+class SamplerFailed(RuntimeError):
+    """The sampler actor did not answer the learner within actors.sampler_timeout."""
+
+
+class SamplerClient:
+    """The learner's view of the sampler actor: the calls of a local curriculum, each answered
+    within `timeout` s (Ray restarts a dead sampler and retries the call meanwhile) or
+    `SamplerFailed`."""
+
+    def __init__(self, handle: ray.actor.ActorHandle, timeout: float = 60.0) -> None:
         self.handle = handle
+        self.timeout = timeout
+
+    def _get(self, name: str, *args):
+        try:
+            return ray.get(getattr(self.handle, name).remote(*args), timeout=self.timeout)
+        except (GetTimeoutError, RayActorError) as e:
+            raise SamplerFailed(
+                f"the sampler actor did not answer {name} within {self.timeout:.0f} s "
+                f"({type(e).__name__})"
+            ) from None
 
     def next_tasks(self, n: int) -> np.ndarray:
-        return ray.get(self.handle.next_tasks.remote(n, "learner"))
+        return self._get("next_tasks", n, "learner")
 
     def next_deal(self, n: int) -> dict:
-        return ray.get(self.handle.next_deal.remote(n, "learner"))
+        return self._get("next_deal", n, "learner")
 
     def ingest(self, episodes: list[dict]) -> int:
-        return ray.get(self.handle.ingest.remote(episodes))
+        return self._get("ingest", episodes)
 
     def elite_data(self) -> tuple[np.ndarray, np.ndarray]:
-        return ray.get(self.handle.elite_data.remote())
+        return self._get("elite_data")
 
     def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None:
-        ray.get(self.handle.update_motion.remote(layers, version, loss, stage))
+        self._get("update_motion", layers, version, loss, stage)
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
-        ray.get(self.handle.update_marginal.remote(layers, mu, iteration, refill))
+        self._get("update_marginal", layers, mu, iteration, refill)
 
     def set_k(self, k: float) -> None:
-        ray.get(self.handle.set_k.remote(k))
+        self._get("set_k", k)
 
     def summary(self) -> dict:
-        return ray.get(self.handle.summary.remote())
+        return self._get("summary")
 
     def to_state(self) -> dict:
-        return ray.get(self.handle.to_state.remote())
+        return self._get("to_state")
 
     def from_state(self, state: dict) -> None:
-        ray.get(self.handle.from_state.remote(state))
+        self._get("from_state", state)
 
 
 class RayBackend:
@@ -82,6 +119,10 @@ class RayBackend:
         self.mode = cfg.actors.mode
         self.pool = ActorPool(spawn, cfg.actors.num_actors, admit_timeout=cfg.actors.lost_timeout)
         self.pending: dict[ray.ObjectRef, int] = {}  # in-flight fragment -> actor id
+        self.sent: dict[ray.ObjectRef, float] = {}  # in-flight fragment -> when it was asked for
+        self.fragment_errors: dict[str, int] = {}  # reason -> fragments dropped for it
+        self.errors_in_a_row = 0
+        self.should_stop: Callable[[], bool] = lambda: False  # the launcher's stop flag
         self.weights_ref: list[ray.ObjectRef] = []
         self.version = -1
         self.restarts = 0
@@ -118,7 +159,7 @@ class RayBackend:
     def _drop_node(self, node: LostNode) -> None:
         gone = [r for r, i in self.pending.items() if i in node.actor_ids]
         for ref in gone:
-            del self.pending[ref]
+            self._forget(ref)
         self.failing -= set(node.actor_ids)
         self.dropped += len(gone)
         n = len(node.actor_ids)
@@ -134,6 +175,11 @@ class RayBackend:
             self.weights_ref, self.version, self.steps, self.n_tasks
         )
         self.pending[ref] = i
+        self.sent[ref] = time.monotonic()
+
+    def _forget(self, ref: ray.ObjectRef) -> int:
+        self.sent.pop(ref, None)
+        return self.pending.pop(ref)
 
     def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]:
         """Fragments totalling about ppo.num_steps transitions (one per live actor)."""
@@ -146,6 +192,8 @@ class RayBackend:
         answered: set[int] = set()  # actors that delivered or failed this iteration
         lost_since: float | None = None
         while not fragments or not answered >= set(self.pool.ids()):
+            if self.should_stop():
+                raise StopRequested
             self._request_idle(answered)
             waited = 0.0 if lost_since is None else time.monotonic() - lost_since
             if not fragments and waited > self.cfg.actors.lost_timeout:
@@ -162,8 +210,9 @@ class RayBackend:
             ref = self._next_ready(answered)
             if ref is None:
                 self._check_nodes()
+                self._kill_hung(answered)
                 continue
-            i = self.pending.pop(ref)
+            i = self._forget(ref)
             answered.add(i)
             fragment = self._receive(ref, i)
             if fragment is None:
@@ -190,10 +239,13 @@ class RayBackend:
         return ready[0] if ready else None
 
     def _receive(self, ref: ray.ObjectRef, i: int) -> Fragment | None:
-        """The fragment of actor i, or None if its process died (Ray restarts it; it is asked
-        again at once, and the call waits at Ray until the new process takes it)."""
+        """The fragment of actor i, or None if it was lost; then the actor is asked again at
+        once (a dead one waits at Ray until its restarted process takes the call). Reasons:
+        `actor_died` (its process died: Ray restarts it), `object_lost` (the fragment was lost
+        after it was made, e.g. with its node), `sampler` (the sampler did not answer the
+        actor), `env_error` (an exception in the actor's env or policy)."""
         try:
-            fragment = ray.get(ref)
+            fragment = ray.get(ref, timeout=READY_TIMEOUT)  # ray.wait said it is ready
         except RayActorError:
             self._check_nodes(force=True)
             if i not in self.pool:
@@ -201,12 +253,56 @@ class RayBackend:
             if i not in self.failing:
                 self.restarts += 1
                 self.failing.add(i)
-            self.dropped += 1
-            time.sleep(RETRY_PAUSE)  # do not spin on an actor that keeps failing
-            self._request(i)
+            self._fragment_error(i, "actor_died", "its process died; Ray restarts it")
+            return None
+        except (ObjectLostError, GetTimeoutError) as e:
+            self._fragment_error(i, "object_lost", type(e).__name__)
+            return None
+        except RayTaskError as e:
+            cause = getattr(e, "cause", None)
+            reason = "sampler" if isinstance(cause, SamplerUnavailable) else "env_error"
+            self._fragment_error(i, reason, f"{type(cause).__name__}: {str(cause)[:200]}")
             return None
         self.failing.discard(i)
+        self.errors_in_a_row = 0
         return fragment
+
+    def _fragment_error(self, i: int, reason: str, detail: str) -> None:
+        """Drop actor i's fragment under `reason`, ask it again; FragmentsFailing after
+        actors.max_fragment_errors errors in a row."""
+        self.dropped += 1
+        self.errors_in_a_row += 1
+        first = reason not in self.fragment_errors
+        self.fragment_errors[reason] = self.fragment_errors.get(reason, 0) + 1
+        if first or self.fragment_errors[reason] % 100 == 0:  # not one event per fragment
+            self.events.append(
+                ("fragment_error", f"fragment of actor {i} dropped ({reason}): {detail}; "
+                 f"{self.fragment_errors[reason]} so far", {"reason": reason, "actor": i,
+                 "count": self.fragment_errors[reason]})
+            )  # fmt: skip
+        limit = self.cfg.actors.max_fragment_errors
+        if self.errors_in_a_row >= limit:
+            raise FragmentsFailing(
+                f"{self.errors_in_a_row} fragments in a row failed (last: {reason}: {detail}); "
+                f"errors so far: {self.fragment_errors}"
+            )
+        time.sleep(RETRY_PAUSE)  # do not spin on an actor that keeps failing
+        if i in self.pool:
+            self._request(i)
+
+    def _kill_hung(self, answered: set[int]) -> None:
+        """Kill the actors whose fragment is older than actors.fragment_timeout (a hung step,
+        a stopped process); Ray restarts them and they are asked again."""
+        now, timeout = time.monotonic(), self.cfg.actors.fragment_timeout
+        for ref in [r for r, t in self.sent.items() if now - t > timeout]:
+            i = self._forget(ref)
+            if i not in self.pool:
+                continue
+            ray.cancel(ref, force=False)
+            ray.kill(self.pool.handle(i), no_restart=False)
+            self.restarts += 1
+            answered.add(i)
+            self._fragment_error(i, "timeout", f"no fragment within {timeout:.0f} s: killed")
 
     def take_events(self) -> list[tuple[str, str, dict]]:
         """(kind, message, data) of the node losses and joins since the last call."""
@@ -220,6 +316,7 @@ class RayBackend:
             "actor_restarts": self.restarts,
             "actors_lost": self.pool.lost,
             "dropped_fragments": self.dropped,
+            "fragment_errors": sum(self.fragment_errors.values()),
         }
 
     def pids(self) -> list[int]:
@@ -229,4 +326,5 @@ class RayBackend:
         for ref in self.pending:
             ray.cancel(ref, force=False)
         self.pending.clear()
+        self.sent.clear()
         self.pool.close()

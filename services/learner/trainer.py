@@ -39,6 +39,11 @@ from paramimic.task_space import TaskSpace
 from services.learner import checkpoint
 
 
+class StopRequested(Exception):
+    """A backend was asked to stop while it waited for fragments: the iteration is abandoned
+    before anything changed, and `train` ends as if the stop came between iterations."""
+
+
 class TrainingDiverged(RuntimeError):
     """Updates kept producing non-finite losses or gradients; the run stopped with a checkpoint."""
 
@@ -322,7 +327,10 @@ class Trainer:
                     before_iteration()
                     if should_stop():
                         break
-                m = self.iteration(backend)
+                try:
+                    m = self.iteration(backend)
+                except StopRequested:
+                    break
                 log.write(json.dumps(m) + "\n")
                 log.flush()
                 if on_metrics:

@@ -22,7 +22,9 @@ class SamplerActor(SamplerService):
         return os.getpid()
 
 
-def start_sampler(config: dict, redis_url: str, run_id: str, clip: dict | None = None):
+def start_sampler(
+    config: dict, redis_url: str, run_id: str, clip: dict | None = None, timeout: float = 120.0
+):
     """Create the run's named sampler actor on the learner's node (it goes when the learner
     goes; a worker node leaving must not take it) and wait until it has loaded its state.
     `clip`: what an [L21] curriculum knows of the clip (`paramimic.envs.skill_env.clip_setup`)."""
@@ -30,5 +32,5 @@ def start_sampler(config: dict, redis_url: str, run_id: str, clip: dict | None =
     handle = SamplerActor.options(
         name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE, scheduling_strategy=here
     ).remote(config, redis_url, run_id, clip)
-    ray.get(handle.pid.remote())
+    ray.get(handle.pid.remote(), timeout=timeout)
     return handle

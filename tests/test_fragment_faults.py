@@ -1,0 +1,137 @@
+"""Part 10 items 5-6 on a real local Ray: every fragment error has a defined outcome, nothing
+waits forever, and a stop request is honoured while the learner waits for actors."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import time
+
+import pytest
+import ray
+from conftest import wait_until
+
+from paramimic.config import ExperimentConfig
+from services.actors.rollout_actor import RolloutActor
+from services.learner.ray_backend import FragmentsFailing, SamplerClient, SamplerFailed
+from services.learner.trainer import StopRequested
+
+
+def _cfg(**actors) -> ExperimentConfig:
+    return ExperimentConfig.model_validate(
+        {
+            "character": "hopper",
+            "task": {"leg_length": [0.8, 1.2], "target_velocity": [1.0, 1.0]},
+            "env": {"max_episode_seconds": 2.0},
+            "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1},
+            "actors": {"num_actors": 2, "num_envs": 4, **actors},
+            "train": {"checkpoint_every": 100, "seed": 3},
+        }
+    )
+
+
+@ray.remote(num_cpus=1, max_restarts=-1)
+class FlakyActor(RolloutActor.__ray_actor_class__):
+    """A rollout actor whose env raises on every `every`-th call (every = 1: always)."""
+
+    def __init__(self, *args, every: int = 3, **kw) -> None:
+        super().__init__(*args, **kw)
+        self.calls, self.every = 0, every
+
+    def sample(self, *args, **kw):
+        self.calls += 1
+        if self.calls % self.every == 0:
+            raise FloatingPointError("mujoco: simulation unstable (injected)")
+        return super().sample(*args, **kw)
+
+
+def _flaky(every: int):
+    class Options:  # spawner calls actor_class.options(...).remote(...)
+        @staticmethod
+        def options(**opts):
+            inner = FlakyActor.options(**opts)
+
+            class Remote:
+                @staticmethod
+                def remote(*args):
+                    return inner.remote(*args, every=every)
+
+            return Remote
+
+    return Options
+
+
+def test_env_errors_drop_fragments_and_training_goes_on(distributed, tmp_path):
+    trainer, backend = distributed(_cfg(), tmp_path, actor_class=_flaky(3))
+    trainer.train(backend, total_steps=6 * 256)
+    stats = backend.stats()
+    assert trainer.progress.iteration >= 6
+    assert stats["fragment_errors"] >= 2 and backend.fragment_errors.keys() == {"env_error"}
+    assert stats["actor_restarts"] == 0  # an env error is not an actor death
+    kinds = [(k, d["reason"]) for k, _, d in backend.take_events() if k == "fragment_error"]
+    assert ("fragment_error", "env_error") in kinds
+
+
+def test_a_persistent_env_error_stops_with_the_reason(distributed, tmp_path):
+    cfg = _cfg(max_fragment_errors=4)
+    trainer, backend = distributed(cfg, tmp_path, actor_class=_flaky(1))
+    with pytest.raises(FragmentsFailing, match="simulation unstable"):
+        trainer.train(backend, total_steps=4 * 256)
+    assert trainer.progress.iteration == 0
+
+
+def test_a_hung_actor_is_killed_and_replaced(distributed, tmp_path):
+    trainer, backend = distributed(_cfg(fragment_timeout=3.0), tmp_path)
+    trainer.train(backend, total_steps=256)
+    victim = backend.pids()[0]
+    os.kill(victim, signal.SIGSTOP)  # alive but hung: its next fragment never comes
+    try:
+        start = time.monotonic()
+        trainer.train(backend, total_steps=3 * 256)
+        assert time.monotonic() - start < 60
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(victim, signal.SIGCONT)
+    assert backend.fragment_errors.get("timeout", 0) >= 1
+    wait_until(lambda: _pids(backend) and victim not in _pids(backend), 60, "a new process")
+    assert trainer.progress.env_steps >= 3 * 256  # with one actor out, iterations are smaller
+
+
+def _pids(backend) -> list[int]:
+    try:
+        return backend.pids()
+    except ray.exceptions.RayActorError:  # still restarting
+        return []
+
+
+def test_a_stop_request_ends_the_wait_for_actors(distributed, tmp_path):
+    trainer, backend = distributed(_cfg(fragment_timeout=600.0), tmp_path)
+    pids = backend.pids()
+    for pid in pids:
+        os.kill(pid, signal.SIGSTOP)
+    asked = time.monotonic() + 2.0
+    backend.should_stop = lambda: time.monotonic() > asked
+    try:
+        start = time.monotonic()
+        with pytest.raises(StopRequested):
+            backend.collect(trainer.learner.weights(), trainer.learner.version)
+        assert time.monotonic() - start < 10  # honoured within a few seconds
+        backend.should_stop = lambda: time.monotonic() > asked + 3
+        trainer.train(backend, total_steps=10 * 256)  # `train` ends cleanly on it
+        assert trainer.progress.iteration == 0
+    finally:
+        for pid in pids:
+            os.kill(pid, signal.SIGCONT)
+
+
+def test_a_hung_sampler_is_a_sampler_failure(distributed, tmp_path):
+    trainer, backend = distributed(_cfg(), tmp_path)
+    handle = trainer.curriculum.handle
+    pid = ray.get(handle.pid.remote())
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        with pytest.raises(SamplerFailed, match="within 2 s"):
+            SamplerClient(handle, timeout=2.0).summary()
+    finally:
+        os.kill(pid, signal.SIGCONT)
