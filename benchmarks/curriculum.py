@@ -90,6 +90,10 @@ def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dic
     }
 
 
+def _run_job(job: tuple) -> dict:
+    return run(*job)
+
+
 def final_elites(run_dir: Path) -> dict:
     """The elite set in the run's last checkpoint: names, params a', fitness, and per task
     dimension the range the elites cover."""
@@ -193,7 +197,7 @@ def main() -> None:
         if not kept_path(sampling, seed).exists()
     ]
     with multiprocessing.get_context("spawn").Pool(max(1, args.jobs)) as pool:
-        for r in pool.starmap(run, jobs):
+        for r in pool.imap_unordered(_run_job, jobs):  # each kept as soon as it finishes
             kept_path(r["sampling"], r["seed"]).write_text(json.dumps(r))
     runs = [
         json.loads(kept_path(sampling, seed).read_text())

@@ -46,8 +46,9 @@ def train(
         str | None,
         typer.Option(
             envvar="REDIS_URL",
-            help="use this Redis (redis://[:password@]host:port/db); default: start an "
-            "embedded one with its data in the run directory",
+            help="use this Redis (redis://[:password@]host:port/db; a password not in the URL "
+            "comes from $REDIS_PASSWORD_FILE or $REDIS_PASSWORD); default: start an embedded "
+            "one with its data in the run directory",
         ),
     ] = None,
     api: Annotated[bool, typer.Option("--api/--no-api", help="serve the progress API")] = True,
@@ -77,6 +78,7 @@ def train(
 ) -> None:
     """Train a controller for CONFIG: Redis, Ray actors, the sampler and the API, or --serial."""
     from services.launch.training import LaunchError, LaunchOptions, run_training
+    from services.store import with_password
 
     overrides = {
         k: v
@@ -102,7 +104,7 @@ def train(
         serial=serial,
         ray_address=ray_address,
         node_ip=node_ip_address,
-        redis_url=redis_url,
+        redis_url=None if redis_url is None else with_password(redis_url),
         api=api,
         api_host=api_host,
         api_port=api_port,
@@ -124,11 +126,13 @@ def api_cmd(
     host: Annotated[str, typer.Option()] = "127.0.0.1",
     port: Annotated[int, typer.Option()] = 8000,
 ) -> None:
-    """Serve the progress API alone (token for the mutating endpoints: $PARAMIMIC_API_TOKEN)."""
+    """Serve the progress API alone (token for the mutating endpoints: $PARAMIMIC_API_TOKEN;
+    a Redis password not in the URL: $REDIS_PASSWORD_FILE or $REDIS_PASSWORD)."""
     from services.api.app import serve
     from services.api.settings import Settings
+    from services.store import with_password
 
-    serve(Settings(redis_url=redis_url), host, port)
+    serve(Settings(redis_url=with_password(redis_url)), host, port)
 
 
 @app.command()
@@ -357,6 +361,53 @@ def upgrade_checkpoint(
         console.print(f"upgraded {checkpoint.upgrade(path)}")
     except FileNotFoundError as e:
         _fail(str(e))
+
+
+PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
+MIN_SECRET = 16
+
+
+SECRETS = ("REDIS_PASSWORD", "RAY_AUTH_TOKEN")
+
+
+def secret_problems(environ: dict, need: tuple[str, ...] = SECRETS) -> list[str]:
+    """What is wrong with a deployment's secrets (`need` required; PARAMIMIC_API_TOKEN
+    optional): missing, a placeholder, or shorter than 16 characters."""
+    problems = []
+    for name in (*need, "PARAMIMIC_API_TOKEN"):
+        value = environ.get(name, "")
+        if not value:
+            if name in need:
+                problems.append(f"{name} is not set")
+        elif value.lower() in PLACEHOLDERS:
+            problems.append(f"{name} is the placeholder {value!r}: set a random secret")
+        elif len(value) < MIN_SECRET:
+            problems.append(f"{name} is {len(value)} characters: use at least {MIN_SECRET}")
+    return problems
+
+
+@app.command("deploy-check")
+def deploy_check(
+    env_file: Annotated[
+        Path | None,
+        typer.Argument(help="a compose .env file (default: this process's environment)"),
+    ] = None,
+    need: Annotated[str, typer.Option(help="comma-separated secrets that must be set")] = ",".join(
+        SECRETS
+    ),
+) -> None:
+    """Refuse placeholder or short secrets before a cluster starts (the compose services run it
+    first). Make one with: python -c "import secrets; print(secrets.token_hex(32))"."""
+    import os
+
+    from dotenv import dotenv_values
+
+    environ = dict(os.environ) if env_file is None else dotenv_values(env_file)
+    needed = tuple(n for n in need.split(",") if n)
+    problems = secret_problems({k: v or "" for k, v in environ.items()}, needed)
+    if problems:
+        _fail("deploy-check: " + "; ".join(problems))
+    console.print("deploy-check: secrets ok")
 
 
 if __name__ == "__main__":

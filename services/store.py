@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from collections.abc import Callable
+from pathlib import Path
+from urllib.parse import quote, urlsplit, urlunsplit
 
 import redis
 from redis.backoff import ExponentialBackoff
@@ -91,6 +94,27 @@ def connect(
         retry_on_error=list(RETRYABLE),
         redis_connect_func=connected,
     )
+
+
+def with_password(url: str, environ: dict | None = None) -> str:
+    """`url` with the password from $REDIS_PASSWORD_FILE (a file, e.g. a compose secret) or
+    $REDIS_PASSWORD when it has none, so that the password never has to be on a command line."""
+    environ = os.environ if environ is None else environ
+    parts = urlsplit(url)
+    if parts.password or parts.scheme not in ("redis", "rediss"):
+        return url
+    password = None
+    if environ.get("REDIS_PASSWORD_FILE"):
+        password = Path(environ["REDIS_PASSWORD_FILE"]).read_text().strip()
+    elif environ.get("REDIS_PASSWORD"):
+        password = environ["REDIS_PASSWORD"]
+    if not password:
+        return url
+    user = quote(parts.username or "", safe="")
+    netloc = f"{user}:{quote(password, safe='')}@{parts.hostname}"
+    if parts.port:
+        netloc += f":{parts.port}"
+    return urlunsplit(parts._replace(netloc=netloc))
 
 
 def finite(value):
