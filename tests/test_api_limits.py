@@ -107,3 +107,28 @@ def test_redis_down_is_503_with_retry_after_and_no_address(stack):
     body = r.text
     assert str(server.port) not in body and "127.0.0.1" not in body
     assert socket.gethostname() not in body
+
+
+def test_redis_retries_end_at_their_wall_clock_limit(tmp_path):
+    """Part 10 item 6: a Redis that stops answering (SIGSTOP: the socket stays open, each
+    attempt would wait for its timeout) fails a command after about `retry_seconds`."""
+    import os
+    import signal
+    import time
+
+    from services.store import connect
+
+    server = EmbeddedRedis(tmp_path / "stopped")
+    server.start()
+    client = connect(server.url, retry_seconds=2.0)
+    assert client.ping()
+    os.kill(server.process.pid, signal.SIGSTOP)
+    try:
+        start = time.monotonic()
+        with pytest.raises(redis.exceptions.RedisError):
+            client.get("x")
+        elapsed = time.monotonic() - start
+        assert elapsed < 20.0, elapsed  # not hanging: retries counted alone took ~8 min here
+    finally:
+        os.kill(server.process.pid, signal.SIGCONT)
+        server.stop()

@@ -63,6 +63,9 @@ class ApiProcess:
         tail = self.log_path.read_text(errors="replace")[-2000:]
         raise RuntimeError(f"the API did not start on {self.url}:\n{tail}")
 
+    def alive(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
     def stop(self, timeout: float = 10.0) -> None:
         stop_process(self.process, timeout)
         self.process = None

@@ -225,7 +225,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
         f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"
     )
-    api_url = None
+    api_url, api = None, None
     if opts.api:
         api = ApiProcess(redis_url, opts.api_host, api_port, opts.api_token, run_dir / "api.log")
         api_url = api.start()
@@ -251,7 +251,11 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         if announced and not stop.set:
             reporter.set_status("running", "training resumed")
 
-    def on_checkpoint(path: Path, iteration: int) -> None:
+    def on_checkpoint(path: Path | None, iteration: int, error: str | None = None) -> None:
+        if error is not None:
+            reporter.event("checkpoint_failed", error, {"iteration": iteration})
+            console.print(f"[yellow]{error}[/]")
+            return
         reporter.event("checkpoint", f"checkpoint at iteration {iteration}", {"path": str(path)})
 
     status, code = "failed", 1
@@ -262,6 +266,11 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
                 reporter.progress(m)
                 for kind, message, data in backend.take_events():  # nodes lost and joined
                     reporter.event(kind, message, {**data, "iteration": m["iteration"]})
+                    console.print(f"[yellow]{message}[/]")
+                if api is not None and not api.alive():  # the API died: start it again
+                    api.start()
+                    message = f"the API process had exited; restarted on {api.url}"
+                    reporter.event("api_restarted", message, {"iteration": m["iteration"]})
                     console.print(f"[yellow]{message}[/]")
                 show(m)
 

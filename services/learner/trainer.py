@@ -307,15 +307,29 @@ class Trainer:
         on_metrics: Callable[[dict], None] | None = None,
         should_stop: Callable[[], bool] = lambda: False,
         before_iteration: Callable[[], None] | None = None,
-        on_checkpoint: Callable[[Path, int], None] | None = None,
+        on_checkpoint: Callable[..., None] | None = None,
     ) -> None:
         """Iterate until `total_steps` env steps; checkpoint every K iterations and at the end.
 
         `before_iteration` may block (a paused run); `should_stop` is asked before and after it.
         """
 
-        def checkpoint_now() -> None:
-            path = self.save_checkpoint()
+        def checkpoint_now(final: bool = False) -> None:
+            """A periodic checkpoint that cannot be written (a full disk) is reported and
+            training goes on (the last written one stands); the final one raises."""
+            try:
+                path = self.save_checkpoint()
+            except OSError as e:
+                if final:
+                    raise
+                message = (
+                    f"checkpoint at iteration {self.progress.iteration} not written ({e}); "
+                    f"training goes on, the last checkpoint stands"
+                )
+                logging.getLogger(__name__).warning(message)
+                if on_checkpoint:
+                    on_checkpoint(None, self.progress.iteration, message)
+                return
             if on_checkpoint:
                 on_checkpoint(path, self.progress.iteration)
 
@@ -346,7 +360,7 @@ class Trainer:
         finally:
             log.close()
             if self._consistent:
-                checkpoint_now()
+                checkpoint_now(final=True)
             else:  # interrupted inside an update: the last checkpoint stands
                 logging.getLogger(__name__).warning(
                     f"interrupted during an update at iteration {self.progress.iteration}: "
