@@ -128,7 +128,7 @@ def test_redis_retries_end_at_their_wall_clock_limit(tmp_path):
         with pytest.raises(redis.exceptions.RedisError):
             client.get("x")
         elapsed = time.monotonic() - start
-        assert elapsed < 20.0, elapsed  # not hanging: retries counted alone took ~8 min here
+        assert elapsed < 20.0, elapsed  # counted retries alone: 12 x a 10 s socket timeout
     finally:
         os.kill(server.process.pid, signal.SIGCONT)
         server.stop()
