@@ -166,6 +166,11 @@ def test_damaged_latest_falls_back_and_old_files_are_pruned(tmp_path):
         state = checkpoint.load(tmp_path)
     assert state["progress"]["iteration"] == 3
     assert any("damaged or truncated" in str(w.message) for w in caught)
+    garbage = d / ".garbage"  # random bytes replacing latest.pt: damaged, not "unsafe"
+    garbage.write_bytes(np.random.default_rng(0).bytes(4096))
+    os.replace(garbage, latest)
+    with pytest.warns(UserWarning, match="damaged or truncated"):
+        assert checkpoint.load(tmp_path)["progress"]["iteration"] == 3
     checkpoint.save(tmp_path, state, 5, keep=2)
     assert not (d / ".tmp-stale.pt").exists()
     assert checkpoint.load(tmp_path)["progress"]["iteration"] == 3  # the state saved as ckpt 5

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import resource
+import time
 
 import numpy as np
 import ray
@@ -83,20 +84,29 @@ class RolloutActor:
         if version != self.worker.policy_version:
             self.worker.set_weights(ray.get(weights[0], timeout=self.sampler_timeout), version)
         if isinstance(tasks, int):
-            tasks = self._ask_sampler(self.sampler.next_deal.remote(tasks, self.source))
+            n = tasks
+            tasks = self._ask_sampler(lambda: self.sampler.next_deal.remote(n, self.source))
         fragment = self.worker.collect(num_steps, tasks, use_policy)
         if self.sampler is not None:  # acknowledged before the learner sees the fragment
             episodes = [e.to_dict() for e in fragment.episodes]
-            self._ask_sampler(self.sampler.ingest.remote(episodes))
+            self._ask_sampler(lambda: self.sampler.ingest.remote(episodes))
         return fragment
 
-    def _ask_sampler(self, ref: ray.ObjectRef):
-        """The sampler's answer within actors.sampler_timeout, else SamplerUnavailable (the
-        learner files the dropped fragment under the sampler, not under this actor)."""
-        try:
-            return ray.get(ref, timeout=self.sampler_timeout)
-        except (GetTimeoutError, RayActorError) as e:
-            raise SamplerUnavailable(f"the sampler did not answer: {type(e).__name__}") from None
+    def _ask_sampler(self, call):
+        """The sampler's answer to `call()` within actors.sampler_timeout; a sampler that is
+        restarting is asked again (ingestion is idempotent by episode id). Else
+        SamplerUnavailable: the learner files the dropped fragment under the sampler."""
+        deadline = time.monotonic() + self.sampler_timeout
+        while True:
+            try:
+                return ray.get(call(), timeout=max(deadline - time.monotonic(), 0.1))
+            except (GetTimeoutError, RayActorError) as e:
+                if isinstance(e, GetTimeoutError) or time.monotonic() > deadline:
+                    raise SamplerUnavailable(
+                        f"the sampler did not answer within {self.sampler_timeout:.0f} s: "
+                        f"{type(e).__name__}"
+                    ) from None
+                time.sleep(0.5)  # restarting: Ray brings it back and it reloads from Redis
 
 
 def spawner(cfg: ExperimentConfig, obs_dim: int, act_dim: int, sampler: str, actor_class=None):

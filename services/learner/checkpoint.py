@@ -15,6 +15,7 @@ import os
 import pickle
 import tempfile
 import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -143,6 +144,8 @@ def resolve(path: Path) -> Path:
 
 def read(file: Path) -> dict:
     """One checkpoint file, loaded without running code (CheckpointError if unreadable)."""
+    if not zipfile.is_zipfile(file):  # torch.save writes a zip archive; this is not one
+        raise CheckpointError(f"{file} is damaged or truncated: not a torch checkpoint archive")
     try:
         state = torch.load(file, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
