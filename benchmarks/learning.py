@@ -15,6 +15,13 @@ Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs
     pip install -e ".[bench]"; python benchmarks/learning.py all [--steps 1000000] [--seeds 0,1,2]
     python benchmarks/learning.py ours_base --seed 1     # one stage
     python benchmarks/learning.py merge                  # summarize what is there
+    python benchmarks/learning.py targets [--run]        # Part 9's target rows (below)
+
+`targets` reads the result files behind each of Part 9's targets (walker_legs at 5M, adaptive
+vs uniform, biped_lower and quadruped at x0.5 ranges, the base biped at 2M, [L21] walker_jump's
+explored ratio, `make train`'s end) and writes benchmarks/results/targets.json: per row the
+target, the measurement, the seeds it rests on, met or missed, and the command that makes it.
+With --run, the commands of rows whose results are missing run first (resumable; long).
 """
 
 from __future__ import annotations
@@ -273,14 +280,108 @@ def _brief(r: dict) -> dict:
     return {k: r[k] for k in keys if k in r} | ({"grid": r["grid"]} if "grid" in r else {})
 
 
+def _study(variant: str, millions: int, seeds=(0, 1, 2)) -> list[dict]:
+    runs = []
+    for seed in seeds:
+        path = RESULTS / f"study_{variant}_s{seed}_{millions}M.json"
+        if path.exists():
+            runs.append(json.loads(path.read_text()))
+    return runs
+
+
+def _falls_row(variant: str, millions: int, at_most: float, extra: str = "") -> dict:
+    runs = _study(variant, millions)
+    falls = [r["fall_percent"] for r in runs]
+    row = {
+        "seeds": [r["seed"] for r in runs],
+        "measured": {
+            "fall_percent": falls,
+            "forward_speed": [r["mean_forward_speed"] for r in runs],
+            "worst_decile_over_mean": [
+                r["worst_decile_return"] / max(r["mean_return"], 1e-9) for r in runs
+            ],
+        },
+        "command": f"python benchmarks/family_study.py queue {variant} --seeds 0,1,2 "
+        f"--steps {millions * 1_000_000}{extra}",
+    }
+    row["met"] = bool(runs) and max(falls) <= at_most
+    return row
+
+
+def targets() -> list[dict]:
+    """Part 9's target rows from the result files (see the module docstring)."""
+    rows = []
+    legs = _falls_row("std_frozen_gamma99", 5, 10.0)
+    m = legs["measured"]
+    legs["met"] = legs["met"] and bool(m["forward_speed"]) and min(m["forward_speed"]) >= 0.8
+    legs["met"] = legs["met"] and min(m["worst_decile_over_mean"], default=0) >= 0.5
+    rows.append({"target": "walker_legs (0.7-1.3 per leg) within 5M steps: <= 10 % falls, speed "
+                 ">= 0.8 m/s, worst-decile return >= 0.5x the mean"} | legs)  # fmt: skip
+    adaptive, uniform = _study("std_frozen_gamma99", 5), _study("std_frozen_gamma99_k0", 5)
+    ratio = None
+    if adaptive and uniform:
+        wd = lambda runs: float(np.mean([r["worst_decile_return"] for r in runs]))  # noqa: E731
+        ratio = wd(adaptive) / wd(uniform)
+    rows.append({
+        "target": "adaptive sampling (k = 10) worst-decile return >= 1.2x uniform's (k = 0), "
+                  "equal budget (5M), 3 seeds",
+        "seeds": [r["seed"] for r in adaptive], "measured": {"ratio": ratio}, "met": bool(
+            ratio and ratio >= 1.2),
+        "command": "python benchmarks/family_study.py queue std_frozen_gamma99,"
+                   "std_frozen_gamma99_k0 --seeds 0,1,2 --steps 5000000",
+    })  # fmt: skip
+    for variant in ("biped_x0.5", "quadruped_x0.5"):
+        rows.append({"target": f"{variant.replace('_x0.5', '')} at x0.5 shape ranges: <= 25 % "
+                     f"falls within 10M steps"} | _falls_row(variant, 10, 25.0))  # fmt: skip
+    rows.append(
+        {"target": "the base biped_lower walking: <= 10 % falls within 2M steps"}
+        | _falls_row("biped_base", 2, 10.0)
+    )
+    path = RESULTS / "curriculum.json"
+    er = json.loads(path.read_text()) if path.exists() else {}
+    comparison = er.get("comparison", {})
+    rows.append({
+        "target": "[L21] walker_jump: curriculum ER >= 1.5x uniform's at equal episodes, 3 seeds",
+        "seeds": er.get("seeds", []),
+        "measured": {"final_ratio": comparison.get("final_ratio"),
+                     "area_ratio": comparison.get("area_ratio")},
+        "met": bool(comparison.get("target_met")) and len(er.get("seeds", [])) >= 3,
+        "command": "python benchmarks/curriculum.py --steps 1500000 --seeds 0,1,2 --jobs 2",
+    })  # fmt: skip
+    path = RESULTS / "make_train_metrics.jsonl"
+    last = json.loads(path.read_text().splitlines()[-1]) if path.exists() else {}
+    tail = [json.loads(x) for x in path.read_text().splitlines()[-10:]] if path.exists() else []
+    end = float(np.mean([x["fall_percent"] for x in tail])) if tail else None
+    rows.append({
+        "target": "`make train` (walker_legs, 2M steps, <= 15 min): <= 20 % falls at the end "
+                  "(training episodes, mean of the last 10 iterations)",
+        "seeds": [0], "measured": {"fall_percent_end": end, "env_steps": last.get("env_steps")},
+        "met": end is not None and end <= 20.0,
+        "command": "make train  (metrics kept as benchmarks/results/make_train_metrics.jsonl)",
+    })  # fmt: skip
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("stage", choices=[*STAGES, *RAY_STAGES, "all", "merge"])
+    ap.add_argument("stage", choices=[*STAGES, *RAY_STAGES, "all", "merge", "targets"])
+    ap.add_argument("--run", action="store_true", help="`targets`: make missing results first")
     ap.add_argument("--steps", type=int, default=1_000_000)
     ap.add_argument("--seed", type=int, default=0, help="seed of a single stage")
     ap.add_argument("--seeds", default="0", help="comma-separated seeds for `all`")
     ap.add_argument("--parallel", type=int, default=2)
     args = ap.parse_args()
+    if args.stage == "targets":
+        if args.run:
+            for row in targets():
+                if not row["seeds"] and row["command"].startswith("python"):
+                    subprocess.call(row["command"].split())
+        rows = targets()
+        (RESULTS / "targets.json").write_text(json.dumps(rows, indent=1))
+        for row in rows:
+            print(f"{'met   ' if row['met'] else 'MISSED'} {row['target']}\n       "
+                  f"seeds {row['seeds']}: {row['measured']}")  # fmt: skip
+        return
     if args.stage == "all":
         jobs = [(stage, int(seed)) for seed in args.seeds.split(",") for stage in STAGES]
 
