@@ -363,6 +363,23 @@ def upgrade_checkpoint(
         _fail(str(e))
 
 
+@app.command("export")
+def export_cmd(
+    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    out: Annotated[Path, typer.Option(help="the policy file to write")],
+    format: Annotated[str, typer.Option(help="onnx or torchscript")] = "onnx",
+) -> None:
+    """The run's deterministic policy, observation normalization folded in, as ONNX or
+    TorchScript, with a JSON sidecar (OUT.json): observation layout, actions, task space."""
+    from services.export import FORMATS, export
+
+    if format not in FORMATS:
+        _fail(f"--format {format!r}: one of {', '.join(FORMATS)}")
+    cfg, policy, _ = _load_policy(run)
+    path, meta = export(policy, cfg, out, format)
+    console.print(f"wrote {path} and {meta}")
+
+
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
 

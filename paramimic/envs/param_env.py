@@ -371,6 +371,21 @@ class ParamEnv(EnvCore):
                 parts.append(self._reference_at(self._phase + ahead / period)[: self._nj])
         return np.concatenate(parts, dtype=np.float32)
 
+    def observation_layout(self) -> list[tuple[str, int]]:
+        """The observation's segments in order, (name, size), as `_observe` builds them."""
+        nj, n_ee, axes = self._nj, self._n_ee, 3 if self._free else 2
+        layout = [("task", len(self._task)), ("q", nj), ("dq", nj), ("end_effectors", axes * n_ee)]
+        if self._free:
+            layout += [("up_heading", 3), ("root_velocity_heading", 3)]
+            layout += [("root_angular_velocity", 3), ("root_up_z_target_direction_com_vy", 4)]
+        else:
+            layout += [("up_xz", 2), ("root_velocity_x_z_pitch", 3)]
+        layout.append(("root_height_target_speed_com_vx_vz", 4))
+        if self._reference is not None:
+            layout += [("phase_sin_cos", 2), ("reference_pose_next", nj)]
+            layout += [(f"reference_pose_{ahead:g}s", nj) for ahead in FUTURE_POSES]
+        return [(name, size) for name, size in layout if size > 0]  # no task: no task segment
+
     @property
     def sim_time(self) -> float:
         return self._steps * self.dt
