@@ -107,3 +107,47 @@ def distributed(local_ray, redis_server, run_id):
             return stack.trainer, stack.backend
 
         yield make
+
+
+SKILL_CFG = {
+    "name": "api-skill",
+    "character": "walker",
+    "task": {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]},
+    "env": {"clip": "planar_jump"},
+    "actors": {"num_envs": 4},
+    "curriculum": {"skill": {"sampling": "uniform", "batch_size": 8, "episodes_per_param": 1}},
+}
+
+
+@pytest.fixture(scope="session")
+def skill_run(redis_server, tmp_path_factory):
+    """An [L21] run: real SkillEnv episodes (tracking m0) ingested by the real sampler service."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.envs import make_env
+    from paramimic.envs.skill_env import clip_setup
+    from paramimic.rl.rollout import RolloutWorker
+    from services.learner.reporter import RunReporter
+    from services.sampler.service import SamplerService
+
+    cfg = ExperimentConfig.model_validate(SKILL_CFG)
+    run_id = "api-skill-run"
+    RunReporter(redis_server.url, run_id).start(
+        cfg, tmp_path_factory.mktemp("skill-run"), 1000, None
+    )
+    sampler = SamplerService(
+        cfg.model_dump(mode="json"), redis_server.url, run_id, clip=clip_setup(cfg)
+    )
+    sampler.update_motion(None, 0, None, "proxy")  # past π0: tasks uniform over the box
+    probe = make_env(cfg.character, cfg.task, cfg.env)
+    worker = RolloutWorker(
+        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        4,
+        probe.observation_space.shape[0],
+        probe.action_space.shape[0],
+        seed=0,
+        task_source=lambda n: sampler.next_deal(n, "test"),
+    )
+    fragment = worker.collect(250, use_policy=False)  # zero actions: m0's PD targets
+    sampler.ingest([e.to_dict() for e in fragment.episodes])
+    assert len(sampler.curriculum.elites) >= 3
+    return run_id

@@ -14,6 +14,7 @@ from pydantic import ValidationError
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
 
+from services.api import dashboard
 from services.api.routes import router
 from services.api.settings import Settings
 
@@ -102,6 +103,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     app.include_router(router)
+    app.include_router(dashboard.router)
     for error in (RedisConnectionError, RedisTimeoutError):
         app.add_exception_handler(error, redis_unavailable)
     damaged = (json.JSONDecodeError, KeyError, TypeError, ValidationError, ResponseValidationError)
