@@ -8,7 +8,6 @@ tracks each body's root from the side, at a distance that follows the body's siz
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 
 import mujoco
@@ -17,13 +16,6 @@ import numpy as np
 from paramimic.envs.param_env import ParamEnv
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
-
-
-def use_software_gl() -> None:
-    """Pick a headless OpenGL backend before MuJoCo creates a context (EGL unless set)."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
-        os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 
 class Camera:

@@ -19,6 +19,17 @@ app = typer.Typer(
 console = Console()
 
 
+def _headless_gl() -> None:
+    """MuJoCo's offscreen renderer on a machine without a display: EGL (Mesa's software
+    rasterizer where there is no GPU) unless MUJOCO_GL says otherwise. MuJoCo reads MUJOCO_GL
+    when it is first imported, so the commands that render call this before importing it."""
+    import os
+
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if os.environ["MUJOCO_GL"] in ("egl", "osmesa"):
+        os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+
 def _fail(message: str) -> None:
     console.print(f"[bold red]error:[/] {message}")
     raise typer.Exit(code=2)
@@ -313,14 +324,14 @@ def render(
     seed: Annotated[int, typer.Option()] = 0,
 ) -> None:
     """Render the controller on several bodies side by side, or one morphing body."""
-    from paramimic.render import render_family, render_morph, use_software_gl
+    _headless_gl()  # before anything imports mujoco: it picks its GL backend at import
+    from paramimic.render import render_family, render_morph
     from services.media import VIDEO_SUFFIXES, write_animation
 
     if out.suffix.lower() not in VIDEO_SUFFIXES:
         _fail(f"--out must end in one of {VIDEO_SUFFIXES}, got {out.name!r}")
     if seconds <= 0 or width < 16 or height < 16:
         _fail("--seconds must be positive and --width/--height at least 16")
-    use_software_gl()
     from paramimic.envs import make_env
     from paramimic.evaluation import deterministic
 
@@ -378,6 +389,27 @@ def export_cmd(
     cfg, policy, _ = _load_policy(run)
     path, meta = export(policy, cfg, out, format)
     console.print(f"wrote {path} and {meta}")
+
+
+@app.command()
+def play(
+    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    host: Annotated[str, typer.Option(help="address to serve on")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="port (0: any free port)")] = 8010,
+) -> None:
+    """The run's controller in real time in the browser: sliders change the body and the goal
+    on the fly ([WL19] §5.2); [L21] runs perform the skill of the chosen task parameter."""
+    _headless_gl()
+    from services.launch.processes import free_port, port_is_free
+    from services.play import serve
+
+    if port == 0:
+        port = free_port(host)
+    elif not port_is_free(host, port):
+        _fail(f"{host}:{port} is in use; pass --port (0 = any free port)")
+    cfg, policy, state = _load_policy(run)
+    console.print(f"play: http://{host}:{port}  ({cfg.name}, {cfg.character}; Ctrl-C to stop)")
+    serve(cfg, policy, state, host, port)
 
 
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}

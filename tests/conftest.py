@@ -1,3 +1,6 @@
+import os
+import shutil
+import subprocess
 import warnings
 
 import pytest
@@ -151,3 +154,37 @@ def skill_run(redis_server, tmp_path_factory):
     sampler.ingest([e.to_dict() for e in fragment.episodes])
     assert len(sampler.curriculum.elites) >= 3
     return run_id
+
+
+CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+
+
+def _have_chromium() -> str | None:
+    """None if Chromium and its driver are there (installed with apt if need be), else why not."""
+    if os.path.exists(CHROMIUM) and os.path.exists(DRIVER):
+        return None
+    if os.geteuid() != 0 or shutil.which("apt-get") is None:
+        return "headless Chromium needs Debian's chromium and chromium-driver (root and apt)"
+    env = os.environ | {"DEBIAN_FRONTEND": "noninteractive"}
+    res = subprocess.run(["apt-get", "install", "-y", "--no-install-recommends", "chromium",
+                          "chromium-driver"], capture_output=True, text=True, env=env)  # fmt: skip
+    if res.returncode != 0:
+        return f"apt-get could not install chromium: {res.stderr[-300:]}"
+    return None
+
+
+@pytest.fixture(scope="session")
+def browser():
+    why = _have_chromium()
+    if why:
+        pytest.skip(why)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,2000"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    yield driver
+    driver.quit()

@@ -6,7 +6,6 @@ benchmarks/results/ (dashboard_runs.png, dashboard_run.png, dashboard_skill.png)
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -19,7 +18,6 @@ from conftest import API_TOKEN, wait_until
 
 ROOT = Path(__file__).resolve().parent.parent
 SHOTS = ROOT / "benchmarks" / "results"
-CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 TINY = {
     "name": "dash",
     "character": "hopper",
@@ -30,37 +28,6 @@ TINY = {
     "actors": {"num_actors": 1, "num_envs": 4},
     "train": {"total_steps": 10**9, "checkpoint_every": 5},
 }
-
-
-def _have_chromium() -> str | None:
-    """None if Chromium and its driver are there (installed with apt if need be), else why not."""
-    if os.path.exists(CHROMIUM) and os.path.exists(DRIVER):
-        return None
-    if os.geteuid() != 0 or shutil.which("apt-get") is None:
-        return "headless Chromium needs Debian's chromium and chromium-driver (root and apt)"
-    env = os.environ | {"DEBIAN_FRONTEND": "noninteractive"}
-    res = subprocess.run(["apt-get", "install", "-y", "--no-install-recommends", "chromium",
-                          "chromium-driver"], capture_output=True, text=True, env=env)  # fmt: skip
-    if res.returncode != 0:
-        return f"apt-get could not install chromium: {res.stderr[-300:]}"
-    return None
-
-
-@pytest.fixture(scope="module")
-def browser():
-    why = _have_chromium()
-    if why:
-        pytest.skip(why)
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,2000"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
-    yield driver
-    driver.quit()
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,7 @@
 """Pictures with the real renderer (MuJoCo offscreen through EGL on Mesa's software renderer):
 `paramimic render` GIF/MP4 of a family and a morph, `paramimic eval --heatmap` PNG."""
 
+import os
 import subprocess
 import sys
 
@@ -27,7 +28,8 @@ def _cli(*args):
         capture_output=True,
         text=True,
         timeout=300,
-        env={**__import__("os").environ, "MUJOCO_GL": "egl"},
+        # MUJOCO_GL unset, as a new user has it: the CLI must choose a headless backend itself
+        env={k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")},
     )
 
 

@@ -214,6 +214,20 @@ class ParamEnv(EnvCore):
         self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
         self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
 
+    def set_goal(self, name: str, value: float) -> np.ndarray:
+        """Change a goal of the task mid-episode (target_velocity, target_direction): the targets
+        follow at once, the body and its state stay. Returns the new observation."""
+        index = self.goal_index(name)
+        if index is None or name in dict(self._shape_idx):
+            raise ValueError(f"{name!r} is not a goal dimension of this task space")
+        if not np.isfinite(value):
+            raise ValueError(f"goal {name!r} must be a finite number, got {value}")
+        self._task = self._task.copy()
+        self._task[index] = float(value)
+        self._set_targets()
+        self._last_obs = self._observe()
+        return self._last_obs
+
     def _shape_changed(self, com_before: np.ndarray) -> None:
         """Targets follow the new body; the average COM velocity continues: its history shifts
         by the COM's jump."""

@@ -1,0 +1,95 @@
+"""`paramimic play` for real: the CLI (MUJOCO_GL unset, as a new user has it) serves a trained
+run in MuJoCo at 30 Hz; headless Chromium moves a body slider on the page, the body in the
+simulation changes and frames keep coming. Screenshot: benchmarks/results/play.png."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import httpx
+import pytest
+import yaml
+from conftest import wait_until
+
+from services.launch.processes import free_port
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY = {
+    "character": "walker",
+    "task": {"left_leg_length": [0.8, 1.2], "right_leg_length": [0.8, 1.2],
+             "target_velocity": [0.5, 1.5]},
+    "env": {"max_episode_seconds": 2.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 128, "num_epochs": 1},
+    "actors": {"num_envs": 4},
+    "train": {"total_steps": 512, "checkpoint_every": 1},
+}  # fmt: skip
+
+
+def _env() -> dict:
+    return {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+
+
+@pytest.fixture(scope="module")
+def play_url(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("play")
+    cfg = tmp / "tiny.yaml"
+    cfg.write_text(yaml.safe_dump(TINY))
+    cli = [sys.executable, "-m", "services.cli"]
+    res = subprocess.run([*cli, "train", cfg, "--serial", "--run-dir", tmp / "run"],
+                         capture_output=True, text=True, timeout=300, env=_env())  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    port = free_port()
+    proc = subprocess.Popen(
+        [*cli, "play", tmp / "run", "--port", str(port)],
+        env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
+    url = f"http://127.0.0.1:{port}"
+
+    def up() -> bool:
+        assert proc.poll() is None, "".join(lines)
+        try:
+            return httpx.get(f"{url}/state", timeout=2).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    wait_until(up, 120, "the play server")
+    assert re.search(rf"play: http://127\.0\.0\.1:{port}", "".join(lines))
+    yield url
+    proc.terminate()  # SIGTERM: uvicorn ends, open MJPEG streams included
+    proc.wait(30)
+
+
+def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url):
+    state = lambda: httpx.get(f"{play_url}/state", timeout=5).json()  # noqa: E731
+    first = state()
+    assert first["kind"] == "family" and first["shape_params"] == [
+        "left_leg_length", "right_leg_length"]  # fmt: skip
+    wait_until(lambda: state()["frame"] > first["frame"] + 10, 60, "frames")
+    browser.get(play_url)
+    wait_until(lambda: browser.execute_script(
+        "const v = document.getElementById('view'); return v.complete && v.naturalWidth > 0;"),
+        60, "the MJPEG stream in the page")  # fmt: skip
+    slider = "return !!document.getElementById('slider-left_leg_length')"
+    wait_until(lambda: browser.execute_script(slider), 30, "the sliders")
+    before = state()
+    browser.execute_script(
+        "const s = document.getElementById('slider-left_leg_length');"
+        "s.value = 1.2; s.dispatchEvent(new Event('input')); s.dispatchEvent(new Event('change'));"
+    )
+    wait_until(lambda: abs(state()["task"]["left_leg_length"] - 1.2) < 1e-6, 30, "the new task")
+    after = state()
+    assert after["body"]["mass"] != pytest.approx(before["body"]["mass"], rel=1e-6)
+    wait_until(lambda: state()["frame"] > after["frame"] + 10, 60, "frames after the change")
+    # a goal slider changes the goal; out-of-range values are refused with a message
+    r = httpx.post(f"{play_url}/task", json={"values": {"target_velocity": 1.4}})
+    assert r.status_code == 200 and r.json()["task"]["target_velocity"] == pytest.approx(1.4)
+    r = httpx.post(f"{play_url}/task", json={"values": {"left_leg_length": 3.0}})
+    assert r.status_code == 422 and "outside its range" in r.json()["detail"]
+    browser.save_screenshot(str(ROOT / "benchmarks" / "results" / "play.png"))
