@@ -93,3 +93,44 @@ def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url):
     r = httpx.post(f"{play_url}/task", json={"values": {"left_leg_length": 3.0}})
     assert r.status_code == 422 and "outside its range" in r.json()["detail"]
     browser.save_screenshot(str(ROOT / "benchmarks" / "results" / "play.png"))
+
+
+def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
+    """[L21]: `perform` resets to the chosen task with m_a = P_θ(a) from the checkpoint's
+    curriculum; a 3D character's target direction follows the arrow keys' `steer`."""
+    from fastapi.testclient import TestClient
+
+    from paramimic.config import load_config
+    from services.learner.trainer import SerialBackend, Trainer
+    from services.play import Session, create_app
+
+    def trained(config: str, overrides: dict):
+        cfg = load_config(ROOT / config, overrides | {"train.run_dir": str(tmp_path / config)})
+        trainer = Trainer(cfg, tmp_path / config)
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+        trainer.train(backend, 2 * cfg.ppo.num_steps)
+        backend.close()
+        return cfg, trainer.learner.policy, trainer.state_dict()
+
+    small = {"ppo.num_steps": 256, "ppo.minibatch_size": 128, "actors.num_envs": 4}
+    skill = Session(*trained("configs/walker_jump.yaml", small))
+    with TestClient(create_app(skill)) as client:
+        state = client.get("/state").json()
+        assert state["kind"] == "skill" and set(state["task"]) == {"gravity", "jump_height"}
+        r = client.post("/perform", json={"values": {"jump_height": 0.4, "gravity": 0.8}})
+        assert r.status_code == 200, r.text
+        performed = skill.space.to_dict(skill.env._task)
+        assert performed == pytest.approx({"gravity": 0.8, "jump_height": 0.4})
+        skill._step()  # the policy acts on the performed task (frames: the browser test)
+        assert skill.env.data.time > 0
+    skill.stop.set()
+
+    steer = {"task.target_direction": [-1.0, 1.0], "env.max_episode_seconds": 2.0}
+    biped = Session(*trained("configs/biped_lower.yaml", small | steer))
+    with TestClient(create_app(biped)) as client:
+        before = client.get("/state").json()["task"]["target_direction"]
+        after = client.post("/steer", json={"delta": 0.15}).json()["task"]["target_direction"]
+        assert after == pytest.approx(before + 0.15)
+        assert client.post("/steer", json={"delta": 5.0}).json()["task"][
+            "target_direction"] == pytest.approx(1.0)  # clipped to the range  # fmt: skip
+    biped.stop.set()

@@ -230,7 +230,7 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         api = ApiProcess(redis_url, opts.api_host, api_port, opts.api_token, run_dir / "api.log")
         api_url = api.start()
         services.callback(api.stop)
-        console.print(f"API: {api_url}  (docs: {api_url}/docs, run id {run_id})")
+        console.print(f"API: {api_url}  (dashboard at /, docs at /docs; run id {run_id})")
     reporter.start(cfg, run_dir, cfg.train.total_steps, api_url)
 
     def before_iteration() -> None:
