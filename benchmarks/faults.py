@@ -260,11 +260,12 @@ class Suite:
             job.proc.kill()
             job.proc.wait(60)
             time.sleep(1.0)
+            resumes = len(self.resumes(run_dir))
             jobs.append(Job(self.cfg, run_dir, self.url, "--resume"))
-            back = self.wait(lambda: self.resumed_at(run_dir) is not None)
+            back = self.wait(lambda: len(self.resumes(run_dir)) > resumes)
             if back is None:
                 return "not resumed: " + self.tail(run_dir), None
-            resumed_at = self.resumed_at(run_dir)
+            resumed_at = self.resumes(run_dir)[-1]
             seconds = self.wait(lambda: self.iteration(run_dir) >= resumed_at + 2)
             total = None if seconds is None else time.monotonic() - start
             return ("resumed" if total is not None else "resumed, no progress"), total
@@ -279,10 +280,10 @@ class Suite:
         names = [p.name for p in (run_dir / "checkpoints").glob("ckpt_*.pt")]
         return any(int(re.findall(r"\d+", n)[0]) >= iteration for n in names)
 
-    def resumed_at(self, run_dir: Path) -> int | None:
-        found = re.findall(r"resumed at iteration (\d+)", (run_dir.parent / f"{run_dir.name}.log")
-                           .read_text())  # fmt: skip
-        return int(found[-1]) if found else None
+    def resumes(self, run_dir: Path) -> list[int]:
+        """The iterations the launches of this run resumed at, in order (from its log)."""
+        log = (run_dir.parent / f"{run_dir.name}.log").read_text()
+        return [int(i) for i in re.findall(r"resumed at iteration (\d+)", log)]
 
     def tail(self, run_dir: Path) -> str:
         return (run_dir.parent / f"{run_dir.name}.log").read_text()[-300:].replace("\n", " | ")
@@ -309,20 +310,23 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="paramimic-faults-"))
     suite = Suite(work, args.times, random.Random(args.seed))
     rows = []
+    out = RESULTS / "faults.json"
     try:
         for fault in faults:
-            row = suite.run_fault(fault)
+            try:
+                row = suite.run_fault(fault)
+            except Exception as e:  # the suite goes on; the row says what broke
+                row = {"fault": fault, "error": f"{type(e).__name__}: {e}"[:500]}
             rows.append(row)
             print(json.dumps(row), flush=True)
+            previous = json.loads(out.read_text())["rows"] if out.exists() else []
+            merged = {r["fault"]: r for r in previous} | {r["fault"]: r for r in rows}
+            out.write_text(json.dumps({
+                "command": "python benchmarks/faults.py " + " ".join(sys.argv[1:]),
+                "rows": [merged[f] for f in FAULTS if f in merged],
+            }, indent=1))  # fmt: skip
     finally:
         suite.close()
-    out = RESULTS / "faults.json"
-    previous = json.loads(out.read_text())["rows"] if out.exists() else []
-    merged = {r["fault"]: r for r in previous} | {r["fault"]: r for r in rows}
-    out.write_text(json.dumps({
-        "command": "python benchmarks/faults.py " + " ".join(sys.argv[1:]),
-        "rows": [merged[f] for f in FAULTS if f in merged],
-    }, indent=1))  # fmt: skip
     print(f"wrote {out}; logs in {work}")
 
 
