@@ -72,6 +72,8 @@ class Job:
         self.proc = subprocess.Popen(
             [
                 sys.executable,
+                "-X",
+                "faulthandler",  # SIGABRT dumps every thread's stack into the log
                 "-m",
                 "services.cli",
                 "train",
@@ -191,7 +193,12 @@ class Suite:
                 after = self.summary(run_dir).get("elites", 0)
                 row["elites_lost"] += max(0, elites - after)
             jobs[-1].proc.send_signal(signal.SIGINT)
-            jobs[-1].proc.wait(180)
+            try:
+                jobs[-1].proc.wait(180)
+            except subprocess.TimeoutExpired:  # a stack dump into the log, then the outcome
+                jobs[-1].proc.send_signal(signal.SIGABRT)
+                time.sleep(5.0)
+                row["messages"].append("did not stop within 180 s of SIGINT: " + self.tail(run_dir))
         finally:
             for job in jobs:
                 if job.proc.poll() is None:
