@@ -57,6 +57,11 @@ class RunKeys:
         self.lease = f"{base}:lease"
 
 
+class SamplerUnavailable(RuntimeError):
+    """What a rollout actor raises when the sampler actor does not answer it within
+    actors.sampler_timeout: the learner files the dropped fragment under the sampler."""
+
+
 def sampler_actor_name(run_id: str) -> str:
     """The named Ray actor that owns a run's curriculum (in RAY_NAMESPACE)."""
     return f"sampler:{run_id}"

@@ -106,3 +106,29 @@ def test_a_serial_trainer_updates_on_every_core(tmp_path):
     Trainer(cfg.model_copy(update={"train": cfg.train.model_copy(update={"torch_threads": 1})}),
             tmp_path)  # fmt: skip
     assert torch.get_num_threads() == 1
+
+
+def test_import_paramimic_registers_the_gym_envs_cheaply():
+    """Part 12: `import paramimic` is enough for gym.make (as gymnasium plugins do), without
+    MuJoCo, torch, Ray or Redis; its id table equals the registry's."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    table = Path(__file__).resolve().parent.parent / "paramimic" / "gym_envs.json"
+    fresh = subprocess.run(  # the built-in registry, without characters tests add
+        [sys.executable, "-c", "import json; from paramimic.envs import registered_envs;"
+         "print(json.dumps(registered_envs()))"], capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    assert json.loads(table.read_text()) == json.loads(fresh), (
+        "paramimic/gym_envs.json is stale: python -m paramimic.envs"
+    )
+    code = (
+        "import sys, paramimic, gymnasium as gym;"
+        "heavy = [m for m in ('mujoco', 'torch', 'ray', 'redis') if m in sys.modules];"
+        "assert not heavy, heavy;"
+        "env = gym.make('paramimic/WalkerLegs-v0'); print(env.reset(seed=0)[0].shape)"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr

@@ -21,11 +21,7 @@ from ray.exceptions import GetTimeoutError, RayActorError
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.rl.rollout import Fragment, RolloutWorker
-from services.keys import RAY_NAMESPACE
-
-
-class SamplerUnavailable(RuntimeError):
-    """The sampler actor did not answer a rollout actor within actors.sampler_timeout."""
+from services.keys import RAY_NAMESPACE, SamplerUnavailable
 
 
 @ray.remote(num_cpus=1, max_restarts=-1)

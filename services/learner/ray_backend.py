@@ -26,7 +26,7 @@ from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayT
 from paramimic.config import ExperimentConfig
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
-from services.actors.rollout_actor import SamplerUnavailable
+from services.keys import SamplerUnavailable
 from services.learner.actor_pool import (
     READY_TIMEOUT,
     ActorPool,
