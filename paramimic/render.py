@@ -60,6 +60,29 @@ def _body_length(model: mujoco.MjModel) -> float:
     return float(x.max() - x.min() + 2 * model.geom_size[:, 0].max())
 
 
+def label(frame: np.ndarray, lines: Sequence[str]) -> np.ndarray:
+    """`frame` with `lines` of text in its top-left corner, on a translucent box."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    image = Image.fromarray(frame).convert("RGBA")
+    size = max(9, frame.shape[0] // 22)
+    font = ImageFont.load_default(size=size)
+    overlay = Image.new("RGBA", image.size, (0, 0, 0, 0))
+    draw = ImageDraw.Draw(overlay)
+    width = max((draw.textlength(line, font=font) for line in lines), default=0)
+    draw.rectangle([0, 0, width + 8, len(lines) * (size + 2) + 6], fill=(255, 255, 255, 170))
+    for k, line in enumerate(lines):
+        draw.text((4, 3 + k * (size + 2)), line, fill=(0, 0, 0, 255), font=font)
+    return np.asarray(Image.alpha_composite(image, overlay).convert("RGB"))
+
+
+def shape_label(env: ParamEnv) -> list[str]:
+    """The body's non-default task parameters, e.g. ['left_leg_length 0.80', ...]."""
+    task = env.task_space.to_dict(env._task)
+    names = [n for n, _ in env._shape_idx] or list(task)
+    return [f"{n} {task[n]:.2f}" for n in names]
+
+
 def render_family(
     act: Act,
     make_env: Callable[[], ParamEnv],
@@ -70,7 +93,8 @@ def render_family(
     seed: int = 0,
 ) -> list[np.ndarray]:
     """One policy on each task's body, side by side: frames [height, width·n, 3] at the
-    control rate. A body whose episode ends (a fall) stays in its last frame."""
+    control rate, each panel labelled with its body's shape parameters and its mean forward
+    speed so far (a fall says so). A body whose episode ends stays in its last frame."""
     envs = [make_env() for _ in tasks]
     cams = [Camera(width, height) for _ in tasks]
     obs = np.stack(
@@ -79,8 +103,17 @@ def render_family(
             for i, (e, t) in enumerate(zip(envs, tasks, strict=True))
         ]
     )
-    done = [False] * len(envs)
-    last = [c.frame(e) for c, e in zip(cams, envs, strict=True)]
+    start = [e.data.qpos[0] for e in envs]
+    steps = [0] * len(envs)
+    done, fell = [False] * len(envs), [False] * len(envs)
+
+    def panel(i: int) -> np.ndarray:
+        env, t = envs[i], max(steps[i], 1) * envs[i].dt
+        speed = (env.data.qpos[0] - start[i]) / t if steps[i] else 0.0
+        status = "fell" if fell[i] else f"speed {speed:.2f} m/s"
+        return label(cams[i].frame(env), [*shape_label(env), status])
+
+    last = [panel(i) for i in range(len(envs))]
     frames = [np.concatenate(last, axis=1)]
     for _ in range(int(round(seconds / envs[0].dt))):
         actions = act(obs)
@@ -88,8 +121,9 @@ def render_family(
             if done[i]:
                 continue
             obs[i], _, terminated, truncated, _ = env.step(actions[i])
-            done[i] = terminated or truncated
-            last[i] = cams[i].frame(env)
+            steps[i] += 1
+            done[i], fell[i] = terminated or truncated, bool(terminated)
+            last[i] = panel(i)
         frames.append(np.concatenate(last, axis=1))
         if all(done):
             break
@@ -126,12 +160,12 @@ def render_morph(
     obs, _ = env.reset(seed=seed, options={"task": task})
     obs = env.set_shape(path[0])
     cam = Camera(width, height)
-    frames = [cam.frame(env)]
+    frames = [label(cam.frame(env), shape_label(env))]
     steps = int(round(seconds / env.dt))
     for i in range(steps):
         obs = env.set_shape(morph_path(path, (i + 1) / steps))
         obs, _, terminated, truncated, _ = env.step(act(obs[None])[0])
-        frames.append(cam.frame(env))
+        frames.append(label(cam.frame(env), shape_label(env)))
         if terminated or truncated:
             break
     cam.close()

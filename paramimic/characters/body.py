@@ -249,12 +249,19 @@ def world_spec(name: str, floor: bool = True, light_height: float = 4.0) -> mujo
     spec.option.timestep = TIMESTEP
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     if floor:
+        # a checker of 0.5 m squares (a 16-pixel texture: visual only, cheap to compile), so
+        # that motion and speed show in pictures
+        spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D,
+                         builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=[0.85, 0.85, 0.85],
+                         rgb2=[0.6, 0.6, 0.62], width=16, height=16)  # fmt: skip
+        checker = spec.add_material(name="checker", texrepeat=[1, 1], texuniform=True)
+        checker.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
         spec.worldbody.add_geom(
             name="floor",
             type=mujoco.mjtGeom.mjGEOM_PLANE,
             size=[0, 0, 1],
             friction=[1.0, 0.005, 1e-4],
-            rgba=[0.8, 0.8, 0.8, 1],
+            material="checker",
         )
     spec.worldbody.add_light(pos=[0, 0, light_height], dir=[0, 0, -1])
     return spec
