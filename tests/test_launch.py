@@ -328,6 +328,9 @@ def test_a_run_has_one_owner_and_a_killed_launcher_takes_its_children(
         launch.proc.kill()
         launch.proc.wait(30)
         wait_until(lambda: not any(_alive(p) for p in children), 15, "Redis and API to exit")
+        # and everything else it started, Ray's agents included (the reaper sees to them)
+        left = lambda: [n for p, n in launch.descendants.items() if _alive(p)]  # noqa: E731
+        wait_until(lambda: not left(), 45, "every process the launcher started to exit")
         with pytest.raises(httpx.ConnectError):
             httpx.get(f"{url}/health", timeout=2.0)
     finally:

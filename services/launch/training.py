@@ -22,6 +22,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from paramimic.config import ExperimentConfig, resume_conflicts
+from services.launch import reaper
 from services.learner import checkpoint
 from services.learner.trainer import SerialBackend, Trainer, TrainingDiverged
 
@@ -200,6 +201,8 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
     from services.learner.reporter import RunOwned, RunReporter
 
     cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
+    watchdog = reaper.start()  # ends what we start if we are killed; stopped last on the way out
+    services.callback(lambda: (watchdog.terminate(), watchdog.wait(10)))
     redis_url = opts.redis_url
     if redis_url is None:
         server = EmbeddedRedis(run_dir / "redis")
