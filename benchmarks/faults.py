@@ -304,12 +304,39 @@ def _quietly(f) -> None:
         f()
 
 
+def table(rows: list[dict]) -> str:
+    """The README's fault table."""
+    lines = [
+        "| fault | injected | outcome | episodes lost / double-counted | elites lost "
+        "| recovery s (mean, max) | processes left |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if "error" in r or "skipped" in r:
+            lines.append(f"| {r['fault']} | – | {r.get('error') or r.get('skipped')} | | | | |")
+            continue
+        outcomes = sorted(set(r["outcomes"]))
+        counts = ", ".join(f"{r['outcomes'].count(o)}x {o}" for o in outcomes)
+        secs = [x for x in r["recovery_seconds"] if x is not None]
+        rec = f"{sum(secs) / len(secs):.1f}, {max(secs):.1f}" if secs else "–"
+        left = ", ".join(r["processes_left"]) or "0"
+        lines.append(
+            f"| {r['fault']} | {r['injected']} | {counts} | {r['episodes_lost']} / "
+            f"{r['episodes_double_counted']} | {r['elites_lost']} | {rec} | {left} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--faults", default=",".join(FAULTS))
     ap.add_argument("--times", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--table", action="store_true", help="print faults.json as a markdown table")
     args = ap.parse_args()
+    if args.table:
+        print(table(json.loads((RESULTS / "faults.json").read_text())["rows"]))
+        return
     faults = args.faults.split(",")
     unknown = set(faults) - set(FAULTS)
     if unknown:
