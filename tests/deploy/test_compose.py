@@ -66,6 +66,7 @@ def engine(tmp_path_factory):
         while not _ok("docker", "info"):
             assert daemon.poll() is None and time.monotonic() < deadline, "dockerd did not start"
             time.sleep(1)
+    _remove_stale_projects()
     try:
         if not _ok("docker", "image", "inspect", BASE):
             rootfs = tmp_path_factory.mktemp("rootfs")
@@ -79,6 +80,20 @@ def engine(tmp_path_factory):
         if daemon is not None:
             daemon.terminate()
             daemon.wait(timeout=60)
+
+
+def _remove_stale_projects() -> None:
+    """Containers and volumes of an earlier run of this test that was killed before its
+    `down`: a restarted engine would bring them back (restart: unless-stopped)."""
+    names = _run("docker", "ps", "-a", "--format", "{{.Names}}").stdout.split()
+    for project in {n.split("_")[0] for n in names if n.startswith("pmtest")}:
+        pid = project.removeprefix("pmtest")
+        if pid.isdigit() and not os.path.exists(f"/proc/{pid}"):
+            _run("docker", "rm", "-f", *[n for n in names if n.startswith(project + "_")])
+            volumes = _run("docker", "volume", "ls", "-q").stdout.split()
+            stale = [v for v in volumes if v.startswith(project + "_")]
+            if stale:
+                _run("docker", "volume", "rm", *stale)
 
 
 def _local_build_inputs() -> None:
