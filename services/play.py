@@ -80,8 +80,9 @@ class Session:
             self.fell_at = None
 
     def set(self, values: dict[str, float]) -> None:
-        """New values of task parameters, checked against the task space; [WL19] runs change
-        the body or the goal in place, [L21] runs keep them for the next `perform`."""
+        """New values of task parameters, checked against the task space: a shape parameter
+        changes the body in place; a [WL19] goal changes at once, an [L21] one (jump height,
+        gravity) at the next `perform`."""
         names = list(self.space.names)
         for name, value in values.items():
             if name not in names:
@@ -92,11 +93,11 @@ class Session:
         with self.lock:
             for name, value in values.items():
                 self.task[names.index(name)] = value
-            if self.skill:
-                return
             shape = {n: v for n, v in values.items() if n in self.shape_names}
-            if shape:
+            if shape:  # the body changes on the fly ([WL19] §5.2), in both kinds of run
                 self.obs = self.env.set_shape(shape)
+            if self.skill:  # [L21] goals and conditions take effect at the next `perform`
+                return
             for name, value in values.items():
                 if name in TASK_GOALS:
                     self.obs = self.env.set_goal(name, value)

@@ -125,6 +125,18 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
         assert skill.env.data.time > 0
     skill.stop.set()
 
+    # an [L21] run's body changes on the fly too; its goals wait for `perform`
+    body = Session(*trained("configs/hopper_jump_body.yaml", small))
+    with TestClient(create_app(body)) as client:
+        state = client.get("/state").json()
+        name = state["shape_params"][0]
+        lo, hi = state["ranges"][name]
+        mass = state["body"]["mass"]
+        after = client.post("/task", json={"values": {name: hi}}).json()
+        assert after["task"][name] == pytest.approx(hi)
+        assert after["body"]["mass"] != pytest.approx(mass, rel=1e-6)
+    body.stop.set()
+
     steer = {"task.target_direction": [-1.0, 1.0], "env.max_episode_seconds": 2.0}
     biped = Session(*trained("configs/biped_lower.yaml", small | steer))
     with TestClient(create_app(biped)) as client:

@@ -25,8 +25,10 @@ function sliders(s) {
     input.addEventListener("input", () => {
       document.getElementById("value-" + name).textContent = Number(input.value).toFixed(2);
     });
-    input.addEventListener("change", () => {
-      if (s.kind === "family") post("/task", {values: {[name]: Number(input.value)}});
+    input.addEventListener("change", () => {  // [L21] goals wait for "perform"
+      if (s.kind === "family" || kind === "body") {
+        post("/task", {values: {[name]: Number(input.value)}});
+      }
     });
     box.append(label, input);
   }
