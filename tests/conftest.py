@@ -188,3 +188,16 @@ def browser():
     driver = webdriver.Chrome(service=Service(DRIVER), options=options)
     yield driver
     driver.quit()
+
+
+@pytest.fixture(scope="session")
+def screenshots(tmp_path_factory):
+    """Where the browser tests save their screenshots: $PARAMIMIC_SCREENSHOTS (the README's
+    come from `PARAMIMIC_SCREENSHOTS=benchmarks/results pytest tests/test_dashboard.py
+    tests/test_play.py`), else a temp dir, so that `make test` leaves the checkout clean."""
+    from pathlib import Path
+
+    where = os.environ.get("PARAMIMIC_SCREENSHOTS")
+    path = Path(where) if where else tmp_path_factory.mktemp("screenshots")
+    path.mkdir(parents=True, exist_ok=True)
+    return path

@@ -1,7 +1,8 @@
 """The dashboard in a real browser: headless Chromium (Debian's `chromium` and `chromium-driver`,
 driven by Selenium) on the real API, over a real training job and a real [L21] run. Installs
-Chromium with apt where it can (root); skips with the reason elsewhere. Screenshots go to
-benchmarks/results/ (dashboard_runs.png, dashboard_run.png, dashboard_skill.png)."""
+Chromium with apt where it can (root); skips with the reason elsewhere. Screenshots
+(dashboard_runs.png, dashboard_run.png, dashboard_skill.png) go where the `screenshots` fixture
+says."""
 
 from __future__ import annotations
 
@@ -9,15 +10,12 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import httpx
 import pytest
 import yaml
 from conftest import API_TOKEN, wait_until
 
-ROOT = Path(__file__).resolve().parent.parent
-SHOTS = ROOT / "benchmarks" / "results"
 TINY = {
     "name": "dash",
     "character": "hopper",
@@ -70,7 +68,7 @@ def _iteration(api: httpx.Client, run: str) -> int:
     return r.json()["iteration"] if r.status_code == 200 else -1
 
 
-def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job):
+def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job, screenshots):
     api = httpx.Client(base_url=api_url, timeout=10)
     wait_until(lambda: _iteration(api, job) >= 3, 180, "3 iterations")
     browser.get(f"{api_url}/")
@@ -78,7 +76,7 @@ def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job):
                30, "the run in the runs table")  # fmt: skip
     row = _js(browser, f"return document.querySelector('tr[data-run=\"{job}\"]').innerText")
     assert "running" in row and "hopper" in row
-    browser.save_screenshot(str(SHOTS / "dashboard_runs.png"))
+    browser.save_screenshot(str(screenshots / "dashboard_runs.png"))
 
     browser.get(f"{api_url}/ui/runs/{job}")
     wait_until(lambda: _points(browser, "curve-mean_return") >= 3, 60, "curve points")
@@ -90,7 +88,7 @@ def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job):
     assert cells == len(grid["values"]) * len(grid["values"][0]) == 21 * 21
     assert _points(browser, "task-map", 2) > 0  # the recent task samples over it
     assert _js(browser, "return document.querySelectorAll('#events [data-type]').length") > 0
-    browser.save_screenshot(str(SHOTS / "dashboard_run.png"))
+    browser.save_screenshot(str(screenshots / "dashboard_run.png"))
 
     # pause from the page (the token typed in, sent as a bearer token): progress stops
     _js(browser, f"document.getElementById('token').value = '{API_TOKEN}';"
@@ -105,7 +103,9 @@ def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job):
     wait_until(lambda: api.get(f"/runs/{job}/progress").json()["iteration"] > held, 120, "resume")
 
 
-def test_a_skill_run_page_shows_every_elite_and_the_density(browser, api_url, skill_run):
+def test_a_skill_run_page_shows_every_elite_and_the_density(
+    browser, api_url, skill_run, screenshots
+):
     elites = httpx.get(f"{api_url}/runs/{skill_run}/curriculum/elites?limit=100000").json()
     browser.get(f"{api_url}/ui/runs/{skill_run}")
     density = httpx.get(f"{api_url}/runs/{skill_run}/curriculum/density").json()
@@ -114,7 +114,7 @@ def test_a_skill_run_page_shows_every_elite_and_the_density(browser, api_url, sk
                                     "return d && d.data ? d.data.length : 0") == n_traces,
                60, "the elite scatter")  # fmt: skip
     assert _points(browser, "task-map", n_traces - 1) == elites["total"] >= 3
-    browser.save_screenshot(str(SHOTS / "dashboard_skill.png"))
+    browser.save_screenshot(str(screenshots / "dashboard_skill.png"))
 
 
 def test_the_plotly_bundle_is_served_from_the_wheel(api_url):

@@ -1,6 +1,6 @@
 """`paramimic play` for real: the CLI (MUJOCO_GL unset, as a new user has it) serves a trained
 run in MuJoCo at 30 Hz; headless Chromium moves a body slider on the page, the body in the
-simulation changes and frames keep coming. Screenshot: benchmarks/results/play.png."""
+simulation changes and frames keep coming. Screenshot: play.png (the `screenshots` fixture)."""
 
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def play_url(tmp_path_factory):
     proc.wait(30)
 
 
-def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url):
+def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url, screenshots):
     state = lambda: httpx.get(f"{play_url}/state", timeout=5).json()  # noqa: E731
     first = state()
     assert first["kind"] == "family" and first["shape_params"] == [
@@ -92,7 +92,7 @@ def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url):
     assert r.status_code == 200 and r.json()["task"]["target_velocity"] == pytest.approx(1.4)
     r = httpx.post(f"{play_url}/task", json={"values": {"left_leg_length": 3.0}})
     assert r.status_code == 422 and "outside its range" in r.json()["detail"]
-    browser.save_screenshot(str(ROOT / "benchmarks" / "results" / "play.png"))
+    browser.save_screenshot(str(screenshots / "play.png"))
 
 
 def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
