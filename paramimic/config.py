@@ -443,11 +443,17 @@ class ExperimentConfig(Section):
                     )
         clip = self.env.clip
         if clip is not None and clip not in registration.clips:
-            owners = _registry().clip_owners()
-            raise ValueError(
-                f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
-                + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
-            )
+            if registration.clip_file is not None and clip not in _registry().clip_owners():
+                try:  # a user's clip file: read and checked now, before anything starts
+                    registration.load_clip(clip)
+                except (ValueError, KeyError) as e:
+                    raise ValueError(f"env.clip: {e}") from None
+            else:
+                owners = _registry().clip_owners()
+                raise ValueError(
+                    f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
+                    + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
+                )
         if clip is None and registration.gait is None:
             raise ValueError(
                 f"character {self.character!r} has no [WL19] gait; set env.clip "

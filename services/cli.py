@@ -412,6 +412,45 @@ def play(
     serve(cfg, policy, state, host, port)
 
 
+clip_app = typer.Typer(no_args_is_help=True, help="Motion clips: built-in ones and your own.")
+app.add_typer(clip_app, name="clip")
+
+
+@clip_app.command("info")
+def clip_info(
+    clip: Annotated[str, typer.Argument(help="a clip file (DeepMimic format) or a built-in name")],
+    character: Annotated[str, typer.Option(help="the character the clip is for")] = "humanoid",
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False,
+) -> None:
+    """Frames, duration, loop mode, joints and root travel of a clip, read and checked the way
+    `env.clip` reads it (errors name the problem)."""
+    from paramimic.characters import REGISTRY
+
+    if character not in REGISTRY:
+        _fail(f"--character {character!r}: one of {sorted(REGISTRY)}")
+    try:
+        c = REGISTRY[character].load_clip(clip)
+    except (ValueError, KeyError) as e:
+        _fail(str(e))
+    travel = c.root_position[-1] - c.root_position[0]
+    info = {
+        "name": c.name,
+        "frames": len(c.durations),
+        "duration_s": round(c.duration, 4),
+        "loop": c.loop,
+        "spherical_joints": list(c.spherical_names),
+        "revolute_joints": list(c.revolute_names),
+        "root_travel_m": [round(float(x), 4) for x in travel],
+        "root_height_m": [round(float(c.root_position[:, 2].min()), 4),
+                          round(float(c.root_position[:, 2].max()), 4)],
+    }  # fmt: skip
+    if as_json:
+        print(json.dumps(info))
+        return
+    for key, value in info.items():
+        console.print(f"{key:18s} {value}")
+
+
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
 

@@ -278,5 +278,6 @@ def humanoid_clip(name: str) -> Clip:
 HUMANOID_REGISTRATION = Registration(
     HUMANOID,
     clips={f"humanoid_{name}": partial(humanoid_clip, name) for name in CLIPS},
+    clip_file=load_deepmimic,  # a user's humanoid3d clip in DeepMimic's format
     reward_weights=(4.0, 1.0, 2.0, 1.0, 2.0, 1.0),  # [WL19] Table 3, biped (full)
 )

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import MappingProxyType
 from typing import Protocol, runtime_checkable
 
@@ -73,6 +74,9 @@ class Registration:
     character: Character
     gait: SinusoidalMotion | None = None  # [WL19] §5.3 reference gait (ParamEnv)
     clips: Mapping[str, Callable[[], Clip]] = field(default_factory=dict)  # [L21] (SkillEnv)
+    # reads a user's clip file for this character (e.g. DeepMimic's humanoid3d format); None:
+    # only the built-in clips
+    clip_file: Callable[[Path], Clip] | None = None
     # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "config"); every
     # character also gets `paramimic/<Name>-v0` and one env per clip
     envs: Mapping[str, Mapping] = field(default_factory=dict)
@@ -85,6 +89,20 @@ class Registration:
     @property
     def name(self) -> str:
         return self.character.name
+
+    def load_clip(self, clip: str) -> Clip:
+        """A built-in clip by name, or a clip file (a path) in the character's format; a file
+        that cannot be read or does not fit raises ValueError naming the problem."""
+        if clip in self.clips:
+            return self.clips[clip]()
+        if self.clip_file is None or not Path(clip).suffix and not Path(clip).exists():
+            files = "" if self.clip_file is None else ", or a clip file"
+            raise ValueError(
+                f"clip {clip!r} does not fit {self.name!r}: it has {sorted(self.clips)}{files}"
+            )
+        if not Path(clip).is_file():
+            raise ValueError(f"clip file {clip} does not exist")
+        return self.clip_file(Path(clip))
 
     @property
     def title(self) -> str:

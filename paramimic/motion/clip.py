@@ -162,6 +162,14 @@ def load_deepmimic(path: str | Path, name: str | None = None) -> Clip:
         raise ValueError(
             f"{path}: frames must have {DEEPMIMIC_FRAME} numbers each, got shape {frames.shape}"
         )
+    if not np.isfinite(frames).all():
+        bad = np.argwhere(~np.isfinite(frames))[0]
+        raise ValueError(f"{path}: frame {bad[0]} holds a non-finite number (column {bad[1]})")
+    if len(frames) < 2:
+        raise ValueError(f"{path}: a clip needs at least 2 frames, got {len(frames)}")
+    if (frames[:-1, 0] <= 0).any():
+        k = int(np.argmax(frames[:-1, 0] <= 0))
+        raise ValueError(f"{path}: frame {k} has a non-positive duration {frames[k, 0]}")
     loop = raw.get("Loop", "none")
     if loop not in ("wrap", "none"):
         raise ValueError(f"{path}: Loop must be 'wrap' or 'none', got {loop!r}")

@@ -1,0 +1,96 @@
+"""Part 13 (first step): a clip is a file or a name. A user's DeepMimic-format clip file that is
+not in the repo trains on a real local Ray with the sampler in Redis; bad files fail before
+anything starts, naming the problem; `paramimic clip info` reads a file the same way."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from paramimic.config import ConfigError, load_config
+
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = ROOT / "paramimic" / "data" / "deepmimic" / "humanoid3d_jump.txt"
+
+
+def _user_clip(tmp_path: Path, edit=None, name: str = "my_jump.txt") -> Path:
+    """The shipped jump with a transformed root path (shifted 2 m and travelling twice as
+    far), written where only this test knows it; `edit(raw)` may break it."""
+    raw = json.loads(SHIPPED.read_text())
+    frames = np.array(raw["Frames"])
+    frames[:, 1] = 2.0 + 2.0 * (frames[:, 1] - frames[0, 1])  # root x (DeepMimic's y-up frame)
+    raw["Frames"] = frames.tolist()
+    if edit is not None:
+        edit(raw)
+    path = tmp_path / name
+    path.write_text(json.dumps(raw))
+    return path
+
+
+def _config(tmp_path: Path, clip: Path) -> Path:
+    cfg = {
+        "character": "humanoid",
+        "env": {"clip": str(clip), "max_episode_seconds": 1.0},
+        "task": {"gravity": [0.8, 1.2]},
+        "ppo": {"num_steps": 256, "minibatch_size": 128, "num_epochs": 1},
+        "actors": {"num_actors": 2, "num_envs": 2},
+        "train": {"checkpoint_every": 100},
+    }
+    path = tmp_path / "user.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def test_clip_info_reads_a_user_file(tmp_path):
+    clip = _user_clip(tmp_path)
+    res = subprocess.run([sys.executable, "-m", "services.cli", "clip", "info", str(clip),
+                          "--json"], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    info = json.loads(res.stdout)
+    frames = np.array(json.loads(clip.read_text())["Frames"])
+    assert info["frames"] == len(frames)
+    assert info["duration_s"] == pytest.approx(frames[:-1, 0].sum(), abs=1e-4)
+    # DeepMimic's x stays x in our Z-up world: the doubled root path
+    assert info["root_travel_m"][0] == pytest.approx(frames[-1, 1] - frames[0, 1], abs=1e-3)
+    assert len(info["spherical_joints"]) == 8 and len(info["revolute_joints"]) == 4
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda raw: raw.update(Frames=[f[:40] for f in raw["Frames"]]), "44 numbers each"),
+        (lambda raw: raw["Frames"][3].__setitem__(5, float("nan")), "non-finite"),
+        (lambda raw: raw["Frames"][2].__setitem__(0, 0.0), "non-positive duration"),
+        (lambda raw: raw.update(Loop="bounce"), "Loop must be"),
+        (lambda raw: raw.pop("Frames"), "not a DeepMimic clip"),
+    ],
+    ids=["joint-count", "nan", "duration", "loop", "no-frames"],
+)
+def test_bad_clip_files_fail_before_anything_starts(tmp_path, edit, words):
+    clip = _user_clip(tmp_path, edit)
+    with pytest.raises(ConfigError) as err:
+        load_config(_config(tmp_path, clip))
+    assert "env.clip" in str(err.value) and words in str(err.value)
+
+
+def test_truncated_and_missing_files_are_named(tmp_path):
+    clip = _user_clip(tmp_path)
+    clip.write_text(clip.read_text()[:500])  # truncated JSON
+    with pytest.raises(ConfigError, match="not a DeepMimic clip"):
+        load_config(_config(tmp_path, clip))
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(_config(tmp_path, tmp_path / "nowhere.txt"))
+
+
+def test_a_user_clip_trains_on_ray_with_the_sampler_in_redis(distributed, tmp_path):
+    cfg = load_config(_config(tmp_path, _user_clip(tmp_path)))
+    trainer, backend = distributed(cfg, tmp_path)
+    trainer.train(backend, total_steps=2 * 256)
+    assert trainer.progress.iteration >= 2
+    assert trainer.curriculum.summary()["episodes"] > 0  # the sampler actor saw its episodes
