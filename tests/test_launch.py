@@ -128,7 +128,9 @@ def _assert_locked_down(launch: Launch) -> None:
     gcs_env = gcs_process.environ()  # what the launcher gave Ray (after its own start)
     token = gcs_env["RAY_AUTH_TOKEN"]
     assert gcs_env["RAY_AUTH_MODE"] == "token" and len(token) >= 32
-    args = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    # -ww: full command lines whatever the terminal width (CI sets 80 columns, which cut a
+    # secret at the end of a long line out of sight, and gcs_server's own path with it)
+    args = subprocess.run(["ps", "-eww", "-o", "args"], capture_output=True, text=True).stdout
     assert "gcs_server" in args and "redis-server" in args
     assert password not in args and token not in args
     # a Ray client without the token is refused by the run's GCS
