@@ -69,6 +69,67 @@ class RewardConfig(Section):
         return tuple(t if w is None else w for w, t in zip(mine, table3, strict=True))
 
 
+class TaskMeasureConfig(Section):
+    """A declared task parameter of a skill family: a measure of the episode (and of the clip,
+    for its nominal value a0) from `paramimic.motion.measures`, its unit and its task reward
+    ([L21] §4.2, Eq. 8). In a config it is written inline: `task: {name: {measure: ..., range:
+    [min, max], ...}}`; its range stays in `task`, the rest lands here."""
+
+    measure: str = Field(description="a measure of paramimic.motion.measures.MEASURES")
+    axis: Literal["yaw", "pitch", "roll"] | None = Field(
+        None, description="rotation axis of the heading frame (root_rotation, angular velocity)"
+    )
+    body: str | None = Field(None, description="the end effector it reads (peak heights)")
+    window: tuple[float, float] = Field(
+        (0.0, 1.0), description="the share of the clip it looks at, [start, end] in [0, 1]"
+    )
+    unit: str | None = Field(
+        None, description="unit of the range ('reference': multiples of the clip's own value); "
+        "default: the measure's SI unit",
+    )  # fmt: skip
+    reward: Literal["spike", "continuous"] = Field(
+        "spike", description="[L21] §4.2: paid once at `event`, or every step in the window"
+    )
+    event: Literal["clip_end", "takeoff", "window_end"] | None = Field(
+        None, description="when a spike is paid; default: take-off for take-off measures, the "
+        "window's end for a window, else the clip's end",
+    )  # fmt: skip
+    sigma: PositiveFloat | None = Field(
+        None, description="σ_task of Eq. 8 in the parameter's unit; default: a sixth of the "
+        "range (a tenth of the value for a constraint)",
+    )  # fmt: skip
+
+    @model_validator(mode="after")
+    def _known(self) -> TaskMeasureConfig:
+        from paramimic.motion.measures import MEASURES, REFERENCE, UNITS
+
+        kind = MEASURES.get(self.measure)
+        if kind is None:
+            raise ValueError(f"measure {self.measure!r}: one of {sorted(MEASURES)}")
+        if "axis" in kind.needs and self.axis is None:
+            raise ValueError(f"measure {self.measure!r} needs an axis (yaw, pitch or roll)")
+        if "body" in kind.needs and self.body is None:
+            raise ValueError(f"measure {self.measure!r} needs a body (an end effector)")
+        units = [*UNITS[kind.quantity], REFERENCE]
+        if self.unit is not None and self.unit not in units:
+            raise ValueError(f"unit {self.unit!r} of {self.measure!r}: one of {units}")
+        lo, hi = self.window
+        if not 0.0 <= lo < hi <= 1.0:
+            raise ValueError(f"window {list(self.window)}: need 0 <= start < end <= 1")
+        if self.event == "window_end" and self.window == (0.0, 1.0):
+            raise ValueError("event window_end needs a window")
+        return self
+
+    def resolved_event(self) -> str:
+        from paramimic.motion.measures import MEASURES
+
+        if self.event is not None:
+            return self.event
+        if MEASURES[self.measure].takeoff:
+            return "takeoff"
+        return "window_end" if self.window != (0.0, 1.0) else "clip_end"
+
+
 class SkillConfig(Section):
     """Continuous-time imitation of a clip ([L21] §4): rewards Eq. 5-8, action (d, τ)."""
 
@@ -88,6 +149,10 @@ class SkillConfig(Section):
     w_task_continuous: float = Field(0.1, ge=0)
     tau_scale: PositiveFloat = Field(1.0, description="τ per unit action: Δφ in [e^-s, e^s]")
     trace_bins: int = Field(16, ge=2, description="reference-time bins of a motion trace")
+    measures: dict[str, TaskMeasureConfig] = Field(
+        default_factory=dict,
+        description="declared task parameters: name -> measure (written inline under `task`)",
+    )
 
 
 class EnvConfig(Section):
@@ -386,6 +451,30 @@ class ExperimentConfig(Section):
     actors: ActorsConfig = ActorsConfig()
     train: TrainConfig = TrainConfig()
 
+    @model_validator(mode="before")
+    @classmethod
+    def _inline_measures(cls, data: Any) -> Any:
+        """`task: {name: {measure: ..., range: [lo, hi], ...}}`: the range stays in `task`, the
+        measure goes to `env.skill.measures`."""
+        if not isinstance(data, dict) or not isinstance(data.get("task"), dict):
+            return data
+        inline = {k: v for k, v in data["task"].items() if isinstance(v, dict)}
+        if not inline:
+            return data
+        data = dict(data)
+        data["task"] = dict(data["task"])
+        env = dict(data.get("env") or {})
+        skill = dict(env.get("skill") or {})
+        measures = dict(skill.get("measures") or {})
+        for name, spec in inline.items():
+            spec = dict(spec)
+            if "range" not in spec:
+                raise ValueError(f"task.{name}: a declared parameter needs a range: [min, max]")
+            data["task"][name] = spec.pop("range")
+            measures[name] = spec
+        data["env"] = env | {"skill": skill | {"measures": measures}}
+        return data
+
     @field_validator("character")
     @classmethod
     def _known_character(cls, v: str) -> str:
@@ -420,7 +509,9 @@ class ExperimentConfig(Section):
             )
         registration = _registry().registration(self.character)
         character = registration.character
-        allowed = set(character.param_names()) | set(TASK_GOALS)
+        measures = self.env.skill.measures
+        self._valid_measures(character)
+        allowed = set(character.param_names()) | set(TASK_GOALS) | set(measures)
         shape_ranges = {p.name: (p.low, p.high) for p in character.shape_params}
         for name, (lo, hi) in self.task.items():
             if name not in allowed:
@@ -430,7 +521,7 @@ class ExperimentConfig(Section):
                 )
             if lo > hi:
                 raise ValueError(f"task.{name}: min {lo} > max {hi}")
-            if name in TASK_GOALS and name != "gravity":
+            if name in measures or name in TASK_GOALS and name != "gravity":
                 continue
             if lo <= 0:
                 raise ValueError(f"task.{name}: scales must be positive, got min {lo}")
@@ -463,7 +554,7 @@ class ExperimentConfig(Section):
             raise ValueError(
                 f"task.target_direction: {self.character!r} moves in the sagittal plane only"
             )
-        skill_only = {"gravity", "jump_height"} & set(self.task)
+        skill_only = ({"gravity", "jump_height"} | set(measures)) & set(self.task)
         if clip is None and skill_only:
             raise ValueError(f"task.{sorted(skill_only)[0]} needs env.clip (the skill env)")
         if clip is not None and "target_velocity" in self.task:
@@ -484,6 +575,22 @@ class ExperimentConfig(Section):
         if self.ppo.minibatch_size > self.ppo.num_steps:
             raise ValueError("ppo.minibatch_size must not exceed ppo.num_steps")
         return self
+
+    def _valid_measures(self, character) -> None:
+        """Declared parameters: in the task space, not a body or physics name, reading an end
+        effector the character has."""
+        reserved = (set(character.param_names()) | set(TASK_GOALS)) - {"jump_height"}
+        for name, m in self.env.skill.measures.items():
+            where = f"task.{name}"
+            if name not in self.task:
+                raise ValueError(f"env.skill.measures.{name}: not in task (give it a range)")
+            if name in reserved:
+                raise ValueError(f"{where}: {name!r} is a body or physics parameter, not a measure")
+            if m.body is not None and m.body not in character.end_effectors:
+                raise ValueError(
+                    f"{where}.body {m.body!r}: not an end effector of {self.character!r}; "
+                    f"one of {list(character.end_effectors)}"
+                )
 
     def display_dims(self) -> tuple[str, ...]:
         """Up to two task dimensions for grids: `curriculum.display_dims`, else the first free."""

@@ -423,13 +423,16 @@ def clip_info(
     as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False,
 ) -> None:
     """Frames, duration, loop mode, joints and root travel of a clip, read and checked the way
-    `env.clip` reads it (errors name the problem)."""
+    `env.clip` reads it (errors name the problem), and every measure of the task-parameter
+    library on the reference motion (the nominal a0 of a declared parameter, in SI units)."""
     from paramimic.characters import REGISTRY
+    from paramimic.envs.skill_env import SkillEnv
 
     if character not in REGISTRY:
         _fail(f"--character {character!r}: one of {sorted(REGISTRY)}")
     try:
         c = REGISTRY[character].load_clip(clip)
+        env = SkillEnv(character, {}, {"clip": clip})
     except (ValueError, KeyError) as e:
         _fail(str(e))
     travel = c.root_position[-1] - c.root_position[0]
@@ -443,12 +446,17 @@ def clip_info(
         "root_travel_m": [round(float(x), 4) for x in travel],
         "root_height_m": [round(float(c.root_position[:, 2].min()), 4),
                           round(float(c.root_position[:, 2].max()), 4)],
+        "measures": {k: round(v, 4) for k, v in env.reference_measures().items()},
     }  # fmt: skip
     if as_json:
         print(json.dumps(info))
         return
+    measures = info.pop("measures")
     for key, value in info.items():
         console.print(f"{key:18s} {value}")
+    console.print("measures on the reference motion (SI units: m, rad, rad/s, m/s, J):")
+    for key, value in measures.items():
+        console.print(f"  {key:40s} {value}")
 
 
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}

@@ -185,3 +185,66 @@ def test_motion_trace_displaces_m0_as_eq2():
     assert np.allclose(qa[3:7], turned) or np.allclose(qa[3:7], -turned)
     idx = env.character.qpos_idx
     assert qa[idx] - q0[idx] == pytest.approx(np.eye(env.nj)[2] * 0.2)
+
+
+def test_declared_measures_pay_their_rewards_and_relabel_by_the_same_measure():
+    """Part 13: a take-off energy (spike at take-off, in multiples of m0's) and a foot's peak
+    height (continuous) declared in the config: each is paid as declared, a' and a0 come from
+    the same measure."""
+    measures = {
+        "energy": {"measure": "takeoff_kinetic_energy", "unit": "reference"},
+        "reach": {"measure": "peak_end_effector_height", "body": "foot_r",
+                  "reward": "continuous"},
+    }  # fmt: skip
+    task = {"gravity": (0.3, 0.3), "energy": (0.5, 2.0), "reach": (0.1, 0.4)}
+    env = SkillEnv("walker", task, EnvConfig(clip="planar_jump", skill={"measures": measures}))
+    energy, reach = env.measured
+    assert (energy.event, reach.event) == ("takeoff", "clip_end")
+    assert energy.sigma == pytest.approx(1.5 / 6) and reach.sigma == pytest.approx(0.3 / 6)
+    # a0: m0's own energy is 1 reference unit; the foot's peak height is m0's (0.1-0.4 m)
+    ref = env.reference
+    a0 = env.reference_task()
+    assert a0[1] == pytest.approx(1.0)
+    assert a0[2] == pytest.approx(np.clip(ref.end_effectors["foot_r"][:, 2].max(), 0.1, 0.4))
+    goal = np.array([0.3, 1.2, 0.25])  # at 0.3 G tracking m0 with no displacement takes off
+    rows = _run(env, lambda t: np.zeros(env.nj + 1), {"task": goal})
+    traj = env.episode_trajectory()
+    air = traj.airborne
+    takeoffs = np.flatnonzero(air[1:] & ~air[:-1])  # row i+1 is step i's state
+    assert len(takeoffs) >= 1  # tracking m0 leaves the ground
+    spikes = [i for i, row in enumerate(rows) if row[3]["reward_spike"] > 0]
+    assert spikes == [takeoffs[0]]  # paid once, at the step that took off
+    e_off = traj.kinetic_energy[takeoffs[0] + 1] / env._reference_si["energy"]
+    expected = 10.0 * np.exp(-(((e_off - 1.2) / 0.25) ** 2))
+    assert rows[spikes[0]][3]["reward_spike"] == pytest.approx(expected)
+    # continuous: every step pays 0.1 r_task on the peak so far, next to 0.9 r_tracking
+    for i in (3, len(rows) // 2):
+        peak = traj.end_effectors["foot_r"][: i + 2, 2].max()
+        r_task = np.exp(-(((peak - 0.25) / 0.05) ** 2))
+        assert rows[i][3]["reward_terms"]["task"] == pytest.approx(r_task)
+        tracking = rows[i][0] - rows[i][3]["reward_spike"] - 0.1 * r_task
+        assert 0.0 <= tracking <= 0.9 + 1e-9
+    # hindsight: a' by the same measures on the whole episode, clipped into the box
+    achieved = rows[-1][3]["skill"]["achieved"]
+    assert achieved[1] == pytest.approx(np.clip(e_off, 0.5, 2.0))
+    assert achieved[2] == pytest.approx(np.clip(traj.end_effectors["foot_r"][:, 2].max(), 0.1, 0.4))
+
+
+def test_a_zero_range_measure_is_a_constraint_in_the_fitness():
+    """rotation fixed at 0 turns: Eq. 10 adds w_constraint r_constraint to the fitness of the
+    same episode (same seed, same actions: the measure changes no dynamics)."""
+    measures = {"turn": {"measure": "root_rotation", "axis": "pitch", "unit": "turns",
+                         "sigma": 0.5}}  # fmt: skip
+    base = SkillEnv("walker", {"gravity": (1.0, 1.0)}, EnvConfig(clip="planar_jump"))
+    fixed = SkillEnv("walker", {"gravity": (1.0, 1.0), "turn": (0.0, 0.0)},
+                     EnvConfig(clip="planar_jump", skill={"measures": measures}))  # fmt: skip
+    f0 = _run(base, lambda t: np.zeros(base.nj + 1), {"task": [1.0]})[-1][3]["skill"]
+    f1 = _run(fixed, lambda t: np.zeros(fixed.nj + 1), {"task": [1.0, 0.0]})[-1][3]["skill"]
+    assert f0["completed"] and f1["completed"]
+    # the untrained walker's torso pitches forward by about 1 rad on the way (0.15 turns)
+    turned = fixed.measure(fixed.measured[0])
+    pitch = np.arctan2(-fixed.data.xmat[fixed.character.root_body_id][6],
+                       fixed.data.xmat[fixed.character.root_body_id][8])  # fmt: skip
+    assert turned == pytest.approx(abs(pitch) / (2 * np.pi), abs=0.01)
+    # W_CONSTRAINT 0.1 x exp(-(turned / 0.5)²)
+    assert f1["fitness"] - f0["fitness"] == pytest.approx(0.1 * np.exp(-((turned / 0.5) ** 2)))

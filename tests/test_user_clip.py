@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from scipy.spatial.transform import Rotation
 
 from paramimic.config import ConfigError, load_config
 
@@ -59,6 +60,38 @@ def test_clip_info_reads_a_user_file(tmp_path):
     # DeepMimic's x stays x in our Z-up world: the doubled root path
     assert info["root_travel_m"][0] == pytest.approx(frames[-1, 1] - frames[0, 1], abs=1e-3)
     assert len(info["spherical_joints"]) == 8 and len(info["revolute_joints"]) == 4
+
+
+def _clip_info(clip: str | Path) -> dict:
+    res = subprocess.run([sys.executable, "-m", "services.cli", "clip", "info", str(clip),
+                          "--json"], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    return json.loads(res.stdout)
+
+
+@pytest.mark.parametrize("name", ["backflip", "cartwheel", "jump", "run", "walk"])
+def test_clip_info_measures_each_shipped_clip(name):
+    """Every measure on m0, checked against what the file itself says: frames and duration;
+    the root's total rotation (the norm of the summed keyframe-to-keyframe rotation vectors of
+    the file's root quaternions, which no change of world frame alters); for cyclic clips, the
+    COM travels as far as the root over one cycle."""
+    path = SHIPPED.parent / f"humanoid3d_{name}.txt"
+    info = _clip_info(path)
+    frames = np.array(json.loads(path.read_text())["Frames"])
+    assert info["frames"] == len(frames)
+    assert info["duration_s"] == pytest.approx(frames[:-1, 0].sum(), abs=1e-4)
+    root = Rotation.from_quat(frames[:, [5, 6, 7, 4]])  # DeepMimic stores w, x, y, z
+    turned = np.linalg.norm((root[1:] * root[:-1].inv()).as_rotvec().sum(axis=0))
+    m = info["measures"]
+    assert m["root_rotation"] == pytest.approx(turned, rel=0.03, abs=0.03)
+    assert m["contact_match"] == 1.0 and m["com_rise"] >= 0.0
+    if name == "backflip":  # one turn about the lateral axis, fast in the air
+        assert m["root_rotation axis=pitch"] == pytest.approx(2 * np.pi, rel=0.03)
+        assert m["airborne_angular_velocity axis=pitch"] > 5.0
+    if name in ("run", "walk"):  # cyclic: over a cycle the COM travels as far as the root
+        travel = np.linalg.norm(frames[-1, [1, 3]] - frames[0, [1, 3]])
+        assert m["com_distance"] == pytest.approx(travel, rel=0.03)
+        assert m["average_com_speed"] == pytest.approx(travel / info["duration_s"], rel=0.03)
 
 
 @pytest.mark.parametrize(

@@ -40,6 +40,7 @@ STAGES = ("base", "proxy", "mixed")
 HISTORY = 1000  # (N, ER) points kept
 OPEN_BATCHES = 8  # batches still counted when late episodes arrive
 PROBES = 2048  # fixed points on which ER is estimated
+RECENT = 200  # latest episodes whose a' the summary reports
 
 
 class SkillCurriculum(AdaptiveCurriculum):
@@ -74,6 +75,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.batch_count = 0
         self.history: list[tuple[int, float]] = []  # (N episodes, ER)
         self.improvements = 0
+        self.achieved: list[list[float]] = []  # a' of the latest RECENT episodes (hindsight)
         self.probes = space.sample(np.random.default_rng(seed + 7), PROBES)
         self._density: Density | None = None
 
@@ -217,6 +219,8 @@ class SkillCurriculum(AdaptiveCurriculum):
         n = super().ingest(episodes)
         changed = False
         for e in episodes:
+            if e.get("achieved") is not None:
+                self.achieved.append([float(x) for x in e["achieved"]])
             offer = Offer(False)
             if e.get("trace") is not None and e.get("achieved") is not None:
                 offer = self.elites.offer(
@@ -237,6 +241,7 @@ class SkillCurriculum(AdaptiveCurriculum):
                 record["ingested"] += 1
                 record["improved"] += int(offer.improved)
                 self._maybe_close(e["batch"], record)
+        del self.achieved[:-RECENT]
         if changed:
             self._density = None
         return n
@@ -336,9 +341,21 @@ class SkillCurriculum(AdaptiveCurriculum):
                 "reference": self.space.to_dict(self.reference),
                 "task_ranges": {k: list(v) for k, v in self.space.ranges().items()},
                 "history": [{"episodes": n, "explored_ratio": er} for n, er in self.history[-200:]],
+                "achieved": self._achieved_summary(),
             }
         )
         return s
+
+    def _achieved_summary(self) -> dict[str, dict[str, float]]:
+        """Per task parameter: mean, min and max of a' over the latest episodes."""
+        if not self.achieved:
+            return {}
+        a = np.asarray(self.achieved)
+        return {
+            n: {"mean": float(a[:, i].mean()), "min": float(a[:, i].min()),
+                "max": float(a[:, i].max())}
+            for i, n in enumerate(self.space.names)
+        }  # fmt: skip
 
     # --- state ----------------------------------------------------------------------------------
 
@@ -355,6 +372,7 @@ class SkillCurriculum(AdaptiveCurriculum):
                 "batch_count": self.batch_count,
                 "history": self.history,
                 "improvements": self.improvements,
+                "achieved": self.achieved,
             }
         if "elites" in parts:
             state["elites"] = self.elites.to_state()
@@ -380,6 +398,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.batch_count = int(core.pop("batch_count"))
         self.history = [tuple(h) for h in core.pop("history")]
         self.improvements = int(core.pop("improvements"))
+        self.achieved = core.pop("achieved", [])  # absent in states saved before Part 13
         super().from_state(state | {"core": core})
         self.elites.from_state(state["elites"])
         m = state["motion"]

@@ -7,17 +7,22 @@ The motion to imitate is m_a = (m0 ⊕ d̂)(φ) with the time increments τ̂ of
   Δφ = exp(τ_t) control steps while the simulation advances by Δt, and the PD target is
   m0(φ') ⊕ d_t (§4.1);
 - reward: r = w_tracking r_tracking + w_task r_task (Eq. 5), tracking = 0.28 r_q + 0.28 r_ee +
-  0.28 r_com + 0.16 r_time (Eq. 6-7), continuous; the jump-height task reward (Eq. 8) is a spike
-  paid when the clip ends. Every transition reports Δφ for variable time-step GAE (Eq. 9);
+  0.28 r_com + 0.16 r_time (Eq. 6-7), continuous; the task reward (Eq. 8) compares each measured
+  task parameter (`env.skill.measures`, `paramimic.motion.measures`; `jump_height` is the COM
+  rise) with its goal: a spike paid at its event (the clip's end, take-off, a window's end) or a
+  continuous reward in its window (§4.2). Every transition reports Δφ for variable time-step
+  GAE (Eq. 9) and the spike part of its reward;
 - when the episode ends it reports the trace it made (root displacement measured, joint
-  displacements and τ as acted), the parameter a' it achieved (hindsight) and its fitness F
-  (Eq. 10) against m0 (0 unless the clip was completed).
+  displacements and τ as acted), the parameter a' it achieved (hindsight: every measured
+  parameter by the same measure) and its fitness F (Eq. 10) against m0 (0 unless the clip was
+  completed), with the constraint reward of its zero-range measured parameters.
 Reference time φ is counted in control steps (Δφ = 1 is real time).
 """
 
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -30,11 +35,26 @@ from paramimic.config import ExperimentConfig
 from paramimic.envs.core import EnvCore
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
 from paramimic.motion.fitness import EpisodeTrace, fitness
+from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
 from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
 
 G = 9.81
-CONTACT_HEIGHT = 0.03  # m: an end-effector of m0 this close to the ground is in contact (C_j)
 SKILL_TERMS = ("q", "ee", "com", "time", "task")
+PATH = ("time", "phase", "com", "rot", "ee", "low", "energy", "contact")  # Trajectory rows
+# jump_height without a declaration: the COM rise as a spike at the clip's end (Eq. 8)
+JUMP_HEIGHT = {"measure": "com_rise"}
+
+
+@dataclass(frozen=True)
+class TaskMeasure:
+    """A measured task parameter of this env: its task dimension and how it is rewarded."""
+
+    index: int
+    name: str
+    measure: Measure
+    reward: str  # "spike" or "continuous"
+    event: str  # when a spike is paid: clip_end, takeoff, window_end
+    sigma: float  # σ_task of Eq. 8 in the parameter's unit
 
 
 def clip_setup(cfg: ExperimentConfig) -> dict:
@@ -44,14 +64,17 @@ def clip_setup(cfg: ExperimentConfig) -> dict:
 
 
 class SkillEnv(EnvCore):
-    GOALS = frozenset({"gravity", "jump_height"})
+    @property
+    def GOALS(self) -> frozenset[str]:  # noqa: N802 (EnvCore's name)
+        return frozenset({"gravity", "jump_height", *self.config.skill.measures})
 
     def _setup(self) -> None:
         if self.config.clip is None:
             raise ValueError("SkillEnv needs env.clip")
         self.skill = self.config.skill
         self._gravity_idx = self.goal_index("gravity")
-        self._height_idx = self.goal_index("jump_height")
+        self.measured = self._task_measures()
+        self._energy = any(t.measure.kind == "takeoff_kinetic_energy" for t in self.measured)
         self.clip = self.registration.load_clip(self.config.clip)  # a name or a clip file
         base = self._base
         self.nj = len(base.qpos_idx)
@@ -73,9 +96,33 @@ class SkillEnv(EnvCore):
         obs = self._observe()
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, obs.shape, np.float32)
         w = self.skill
-        spike = self._height_idx is not None
-        self._w_tracking = w.w_tracking_spike if spike else 1.0  # §4.2: 1.0 without a task
-        self._w_task = w.w_task_spike if spike else 0.0
+        continuous = any(t.reward == "continuous" for t in self.measured)
+        # §4.2: (1.0, 10) with spike task rewards, (0.9, 0.1) with continuous ones, 1.0 without
+        self._w_tracking = w.w_tracking_continuous if continuous else 1.0
+        self._w_spike = w.w_task_spike
+        self._w_continuous = w.w_task_continuous
+
+    def _task_measures(self) -> list[TaskMeasure]:
+        """The measured task parameters: `env.skill.measures`, and `jump_height` as the COM rise."""
+        from paramimic.config import TaskMeasureConfig
+
+        out = []
+        for i, name in enumerate(self.task_space.names):
+            spec = self.skill.measures.get(name)
+            if spec is None and name == "jump_height":
+                spec = TaskMeasureConfig(**JUMP_HEIGHT, sigma=self.skill.sigma_task)
+            if spec is None:
+                continue
+            width = float(self.task_space.width[i])
+            sigma = spec.sigma or (width / 6 if width > 0 else 0.1 * abs(self.task_space.low[i]))
+            measure = Measure(
+                spec.measure, spec.unit or default_unit(spec.measure), spec.axis, spec.body,
+                tuple(spec.window),
+            )  # fmt: skip
+            out.append(
+                TaskMeasure(i, name, measure, spec.reward, spec.resolved_event(), sigma or 0.1)
+            )
+        return out
 
     # --- body and reference ------------------------------------------------------------------
 
@@ -85,19 +132,16 @@ class SkillEnv(EnvCore):
         self._scratch = mujoco.MjData(self.model)
         self._index_fall_geoms()
         dt = self.model.opt.timestep * self.frame_skip
-        phis = np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt
-        pose = self.clip.sample(phis)
-        if self.root_nq == self.root_nv:  # planar: the clip is for the base body; feet down
-            pose.root_position[:, 2] += c.hip_height - self._base_hip_height
-        self._q0 = self.definition.pose_qpos(c, pose)  # m0 on the grid [n_ref, nq]
+        self._q0 = self._clip_qpos(c, np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt)
         ee0, com0, low0 = self._kinematics(self._q0)
         self._feet = np.array(
             [list(c.definition.end_effectors).index(f) for f in c.definition.feet]
         )
         self._ee_height0 = ee0[:, self._feet, 2]  # m0 end-effector heights (world) for F
         self._contact0 = low0 < CONTACT_HEIGHT  # C_j of m0: foot near the ground
-        self._standing_com = com0[0, 2]
-        self._m0_rise = float(com0[:, 2].max() - com0[0, 2])
+        self.reference = self._reference_trajectory(self.clip.duration / dt, dt)
+        # every measure's SI value on m0 for this body: the unit of `reference` parameters
+        self._reference_si = {t.name: t.measure.si(self.reference) for t in self.measured}
 
     def _kinematics(self, qpos: np.ndarray):
         """World end-effectors [n, E, 3], COM [n, 3] and each foot's lowest point [n, F]."""
@@ -114,6 +158,48 @@ class SkillEnv(EnvCore):
             com[i] = d.subtree_com[c.root_body_id]
             low[i] = d.site_xpos[feet, 2].min(axis=1)
         return ee, com, low
+
+    def _clip_qpos(self, c: Body, times: np.ndarray) -> np.ndarray:
+        """m0 at reference times (s) as qpos rows of body c: [n, nq]."""
+        pose = self.clip.sample(times)
+        if self.root_nq == self.root_nv:  # planar: the clip is for the base body; feet down
+            pose.root_position[:, 2] += c.hip_height - self._base_hip_height
+        return self.definition.pose_qpos(c, pose)
+
+    def _reference_trajectory(self, length: float, dt: float) -> Trajectory:
+        """m0 on this body as the measures read it, at φ = 0, 1, .. and the clip's end `length`;
+        velocities (for the kinetic energy) by finite differences of the poses."""
+        m, d, c = self.model, self._scratch, self.character
+        phis = np.arange(int(np.floor(length + 1e-9)) + 1, dtype=np.float64)
+        if length - phis[-1] > 1e-6:
+            phis = np.append(phis, length)
+        # the clip's own last pose at its end (a looping clip would start its next cycle there)
+        qpos = self._clip_qpos(c, np.minimum(phis * dt, self.clip.duration * (1 - 1e-9)))
+        n = len(qpos)
+        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
+        com, rot = np.empty((n, 3)), np.empty((n, 3, 3))
+        ee, low = np.empty((n, len(c.ee_site_ids), 3)), np.empty((n, len(feet)))
+        energy = np.zeros(n)
+        for i, row in enumerate(qpos):
+            d.qpos[:] = row
+            if self._energy:
+                a, b = (i, i + 1) if i + 1 < n else (i - 1, i)
+                mujoco.mj_differentiatePos(m, d.qvel, (phis[b] - phis[a]) * dt, qpos[a], qpos[b])
+                mujoco.mj_forward(m, d)
+                mujoco.mj_energyVel(m, d)
+                energy[i] = d.energy[1]
+            else:
+                mujoco.mj_kinematics(m, d)
+                mujoco.mj_comPos(m, d)
+            com[i] = d.subtree_com[c.root_body_id]
+            rot[i] = d.xmat[c.root_body_id].reshape(3, 3)
+            ee[i] = d.site_xpos[c.ee_site_ids]
+            low[i] = d.site_xpos[feet, 2].min(axis=1)
+        return Trajectory(
+            phis * dt, phis / length, com, rot,
+            {name: ee[:, j] for j, name in enumerate(c.definition.end_effectors)},
+            low, energy, float(mujoco.mj_getTotalmass(m)), low < CONTACT_HEIGHT,
+        )  # fmt: skip
 
     def _displaced(self, q0: np.ndarray, d_root: np.ndarray, d_joints: np.ndarray) -> np.ndarray:
         """m0 ⊕ d (Eq. 2) on qpos rows: root position + d0, root rotation exp(d1), joints + d."""
@@ -191,8 +277,10 @@ class SkillEnv(EnvCore):
         self._steps = 0
         self._x0 = float(d.qpos[0])
         self._watch_stability()
-        self._peak_com = float(d.subtree_com[c.root_body_id, 2])
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
+        self._path: dict[str, list] = {k: [] for k in PATH}
+        self._fired: set[str] = set()  # spikes paid this episode
+        self._measure_row(0.0)
         self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
         self._prev_q = d.qpos[c.qpos_idx].copy()
         obs = self._observe()
@@ -213,24 +301,21 @@ class SkillEnv(EnvCore):
         self._phi = phi_next
         if self.diverging():
             return self._end(self._last_obs, 0.0, 0.0, dphi, terminated=True, diverged=True)
-        com = d.subtree_com[c.root_body_id]
-        self._peak_com = max(self._peak_com, float(com[2]))
         self._record(phi_next, d_joints, tau)
+        self._measure_row(phi_next)
         s = self.skill
         terms = list(self._tracking(phi_next, tau))
         r_track = l21_tracking_reward(terms, s.w_q, s.w_ee, s.w_com, s.w_time)  # Eq. 6
-        reward = l21_reward(r_track, 0.0, self._w_tracking, self._w_task)  # Eq. 5, continuous
         obs = self._observe()
         self._last_obs = obs
         fell = self.fall_contact()
         completed = phi_next >= self.length and not fell
+        r_continuous, r_spike = self._task_rewards(completed)
+        reward = l21_reward(r_track, r_continuous or 0.0, self._w_tracking, self._w_continuous)
+        spike = 0.0 if r_spike is None else self._w_spike * r_spike  # Eq. 5, paid at once
+        r_task = r_continuous if r_continuous is not None else r_spike
+        terms.append(0.0 if r_task is None else r_task)
         if fell or completed or self._steps >= self._max_steps:
-            spike = 0.0
-            if completed and self._height_idx is not None:
-                # Eq. 8, a spike paid when the clip (the duration of the jump) ends
-                r_task = l21_task(self.jump_height() - self._task[self._height_idx], s.sigma_task)
-                spike = l21_reward(0.0, r_task, self._w_tracking, self._w_task)
-                terms.append(r_task)
             return self._end(
                 obs,
                 reward + spike,
@@ -241,9 +326,78 @@ class SkillEnv(EnvCore):
                 fell=fell,
                 completed=completed,
             )
-        terms.append(0.0)
-        info = self._info(dphi, 0.0, terms, fell=False)
-        return obs, reward, False, False, info
+        info = self._info(dphi, spike, terms, fell=False)
+        return obs, reward + spike, False, False, info
+
+    # --- task parameters as measures ---------------------------------------------------------
+
+    def _measure_row(self, phi: float) -> None:
+        """One row of the episode's `Trajectory` (the state after this control step)."""
+        m, d, c, path = self.model, self.data, self.character, self._path
+        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
+        path["time"].append(self._steps * self.dt)
+        path["phase"].append(phi / self.length)
+        path["com"].append(d.subtree_com[c.root_body_id].copy())
+        path["rot"].append(d.xmat[c.root_body_id].reshape(3, 3).copy())
+        path["ee"].append(d.site_xpos[c.ee_site_ids].copy())
+        path["low"].append(d.site_xpos[feet, 2].min(axis=1))
+        if self._energy:
+            mujoco.mj_energyVel(m, d)
+        path["energy"].append(float(d.energy[1]) if self._energy else 0.0)
+        k = min(int(round(phi)), len(self._contact0) - 1)
+        path["contact"].append(self._contact0[k])
+
+    def episode_trajectory(self) -> Trajectory:
+        """The episode so far as the measures read it."""
+        p = self._path
+        ee = np.asarray(p["ee"])
+        return Trajectory(
+            np.asarray(p["time"]), np.asarray(p["phase"]), np.asarray(p["com"]),
+            np.asarray(p["rot"]),
+            {n: ee[:, j] for j, n in enumerate(self.character.definition.end_effectors)},
+            np.asarray(p["low"]), np.asarray(p["energy"]),
+            float(mujoco.mj_getTotalmass(self.model)), np.asarray(p["contact"]),
+        )  # fmt: skip
+
+    def measure(self, t: TaskMeasure, traj: Trajectory | None = None) -> float:
+        """A measured task parameter on the episode so far (or `traj`), in its unit."""
+        traj = self.episode_trajectory() if traj is None else traj
+        return t.measure.value(traj, self._reference_si[t.name])
+
+    def _task_rewards(self, completed: bool) -> tuple[float | None, float | None]:
+        """r_task of Eq. 8 for this step: over the continuous parameters in their window, and over
+        the spike parameters whose event happens now (None where there is none)."""
+        if not self.measured:
+            return None, None
+        path = self._path
+        phase, prev = path["phase"][-1], path["phase"][-2]
+        air = [bool(np.all(low > CONTACT_HEIGHT)) for low in path["low"][-2:]]
+        takeoff = air[1] and not air[0]
+        cont, spikes = [], []
+        for t in self.measured:
+            lo, hi = t.measure.window
+            if t.reward == "continuous":
+                if lo <= phase <= hi:
+                    cont.append(t)
+                continue
+            fires = {
+                "clip_end": completed,
+                "takeoff": takeoff,
+                "window_end": prev < hi <= phase,
+            }[t.event]
+            if fires and t.name not in self._fired:
+                self._fired.add(t.name)
+                spikes.append(t)
+
+        traj = self.episode_trajectory() if cont or spikes else None
+
+        def r_task(ts: list[TaskMeasure]) -> float | None:
+            if not ts:
+                return None
+            err = [(self.measure(t, traj) - self._task[t.index]) / t.sigma for t in ts]
+            return l21_task(float(np.linalg.norm(err)), 1.0)  # Eq. 8 over the parameters
+
+        return r_task(cont), r_task(spikes)
 
     def _tracking(self, phi: float, tau: float) -> tuple[float, float, float, float]:
         """r_q, r_ee, r_com, r_time of Eq. 7 against m_a at φ."""
@@ -287,20 +441,42 @@ class SkillEnv(EnvCore):
         self._feet_xy = xy.copy()
 
     def reference_task(self) -> np.ndarray:
-        """a0, the parameter of m0 itself: gravity 1, body scales 1 and the clip's own jump
-        height (the COM rise of m0 on the current body), clipped into the task space."""
+        """a0, the parameter of m0 itself: gravity 1, body scales 1 and every measured parameter
+        on m0 on the current body (1 for `reference` units), clipped into the task space."""
         a = np.ones(self.task_space.dim)
-        if self._height_idx is not None:
-            a[self._height_idx] = self._m0_rise
+        for t in self.measured:
+            a[t.index] = self.measure(t, self.reference)
         return np.clip(a, self.task_space.low, self.task_space.high)
+
+    def reference_measures(self) -> dict[str, float]:
+        """Every measure of the library on m0 on the current body, in SI units (`clip info`)."""
+        from paramimic.motion.measures import AXES, MEASURES
+
+        energy, self._energy = self._energy, True  # every measure, the kinetic energy too
+        try:
+            ref = self._reference_trajectory(self.length, self.dt)
+        finally:
+            self._energy = energy
+        out = {}
+        for kind, k in MEASURES.items():
+            variants: list[dict] = [{}]
+            if "axis" in k.needs or "axis" in k.optional:
+                variants = ([{}] if "axis" in k.optional else []) + [{"axis": a} for a in AXES]
+            if "body" in k.needs:
+                variants = [{"body": b} for b in self.character.definition.end_effectors]
+            for v in variants:
+                label = kind + "".join(f" {k}={x}" for k, x in v.items())
+                out[label] = Measure(kind, default_unit(kind), v.get("axis"), v.get("body")).si(ref)
+        return out
 
     def clip_setup(self) -> dict:
         """{"trace_shape": (bins, D), "reference": a0 as a list}: see `clip_setup`."""
         return {"trace_shape": self.trace_shape, "reference": self.reference_task().tolist()}
 
     def jump_height(self) -> float:
-        """Peak rise of the COM above its standing height so far in this episode."""
-        return self._peak_com - self._standing_com
+        """Peak rise of the COM above its height at the start of this episode so far (m)."""
+        com = np.asarray(self._path["com"])
+        return float(com[:, 2].max() - com[0, 2])
 
     def _end(
         self,
@@ -335,8 +511,9 @@ class SkillEnv(EnvCore):
     def _summary(self, completed: bool) -> dict:
         """Hindsight parameter a', fitness F (Eq. 10) and the trace of this episode."""
         achieved = self._task.copy()
-        if self._height_idx is not None:
-            achieved[self._height_idx] = self.jump_height()
+        traj = self.episode_trajectory()
+        for t in self.measured:  # hindsight a' by the parameter's own measure
+            achieved[t.index] = self.measure(t, traj)
         achieved = np.clip(achieved, self.task_space.low, self.task_space.high)
         rec = self._rec
         if not completed or len(rec["phi"]) < 2:
@@ -355,12 +532,12 @@ class SkillEnv(EnvCore):
             ],
             1,
         )
-        # Eq. 10: a zero-range parameter is a constraint the episode should meet
+        # Eq. 10: zero-range measured parameters are constraints the episode should meet
+        fixed = [t for t in self.measured if self.task_space.width[t.index] == 0]
         r_constraint = 0.0
-        h = self._height_idx
-        if h is not None and self.task_space.width[h] == 0:
-            err = self.jump_height() - self._task[h]
-            r_constraint = float(np.exp(-(err**2) / self.skill.sigma_task**2))
+        if fixed:
+            err = [(self.measure(t, traj) - self._task[t.index]) / t.sigma for t in fixed]
+            r_constraint = l21_task(float(np.linalg.norm(err)), 1.0)
         f = fitness(
             EpisodeTrace(
                 pose_error=np.abs(np.asarray(rec["pose"])),
