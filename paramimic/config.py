@@ -592,6 +592,33 @@ class ExperimentConfig(Section):
                     f"one of {list(character.end_effectors)}"
                 )
 
+    def parameters(self) -> list[dict[str, Any]]:
+        """The task space as a reader sees it (the API, the dashboard): per parameter its range,
+        unit and kind — shape (a multiple of the base body's), condition (gravity), goal
+        (target velocity, direction) or measured (with its measure, reward and event) — and
+        whether a zero range makes it a constraint."""
+        from paramimic.motion.measures import default_unit
+
+        shapes = set(_registry().registration(self.character).character.param_names())
+        measures = dict(self.env.skill.measures)
+        if "jump_height" in self.task and "jump_height" not in measures:
+            measures["jump_height"] = TaskMeasureConfig(measure="com_rise")
+        units = {"gravity": "G", "target_velocity": "m/s", "target_direction": "rad"}
+        out = []
+        for name, (lo, hi) in self.task.items():
+            p: dict[str, Any] = {"name": name, "range": [lo, hi], "constraint": lo == hi}
+            if name in measures:
+                m = measures[name]
+                p |= {"kind": "measured", "unit": m.unit or default_unit(m.measure)}
+                p |= m.model_dump(exclude={"unit", "event"}, exclude_none=True)
+                p["event"] = m.resolved_event() if m.reward == "spike" else None
+            elif name in shapes:
+                p |= {"kind": "shape", "unit": "x base"}
+            else:
+                p |= {"kind": "condition" if name == "gravity" else "goal", "unit": units[name]}
+            out.append(p)
+        return out
+
     def display_dims(self) -> tuple[str, ...]:
         """Up to two task dimensions for grids: `curriculum.display_dims`, else the first free."""
         return self.grid_dims() or tuple(n for n, (lo, hi) in self.task.items() if hi > lo)[:2]

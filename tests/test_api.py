@@ -221,6 +221,38 @@ def test_skill_endpoints(api, run, skill_run):
             assert r.status_code == 404 and "no [L21] skill curriculum" in r.json()["detail"]
 
 
+def test_a_run_lists_its_parameters_by_name_unit_and_measure(api, run, skill_run, redis_server,
+                                                              tmp_path):  # fmt: skip
+    """Part 13: GET /runs/{run} names every task parameter with its unit and meaning."""
+    with httpx.Client(base_url=api) as c:
+        wl19 = c.get(f"/runs/{run}").json()
+        assert wl19["name"] == "api-test" and wl19["config"]["character"] == "hopper"
+        kinds = {p["name"]: (p["kind"], p["unit"], p["constraint"]) for p in wl19["parameters"]}
+        assert kinds == {"leg_length": ("shape", "x base", False),
+                         "torso_length": ("shape", "x base", False),
+                         "target_velocity": ("goal", "m/s", True)}  # fmt: skip
+        l21 = {p["name"]: p for p in c.get(f"/runs/{skill_run}").json()["parameters"]}
+        assert l21["gravity"]["kind"] == "condition" and l21["gravity"]["unit"] == "G"
+        jump = l21["jump_height"]  # the built-in name is the COM rise, a spike at the clip's end
+        assert (jump["measure"], jump["unit"], jump["reward"], jump["event"]) == (
+            "com_rise", "m", "spike", "clip_end")  # fmt: skip
+        cfg = ExperimentConfig.model_validate({
+            "character": "humanoid", "env": {"clip": "humanoid_backflip"},
+            "task": {"spin": {"measure": "airborne_angular_velocity", "axis": "pitch",
+                              "unit": "reference", "range": [0.5, 2.0]},
+                     "turn": {"measure": "root_rotation", "axis": "pitch", "unit": "turns",
+                              "range": [1.0, 1.0]}},
+        })  # fmt: skip
+        RunReporter(redis_server.url, "declared-run").start(cfg, tmp_path, 10, None)
+        declared = {p["name"]: p for p in c.get("/runs/declared-run").json()["parameters"]}
+        spin, turn = declared["spin"], declared["turn"]
+        assert (spin["measure"], spin["axis"], spin["unit"], spin["constraint"]) == (
+            "airborne_angular_velocity", "pitch", "reference", False)  # fmt: skip
+        assert (turn["unit"], turn["constraint"], turn["range"]) == ("turns", True, [1.0, 1.0])
+        r = c.get("/runs/no-such-run")
+        assert r.status_code == 404
+
+
 def test_a_finished_run_cannot_be_paused(api, redis_server, tmp_path):
     cfg = ExperimentConfig.model_validate(CFG)
     reporter = RunReporter(redis_server.url, "finished-run")

@@ -114,6 +114,16 @@ def test_a_skill_run_page_shows_every_elite_and_the_density(
                                     "return d && d.data ? d.data.length : 0") == n_traces,
                60, "the elite scatter")  # fmt: skip
     assert _points(browser, "task-map", n_traces - 1) == elites["total"] >= 3
+    # Part 13: the task parameters by name, unit and measure, with the latest a'
+    rows = _js(browser, "return [...document.querySelectorAll('#parameters tr[data-name]')]"
+                        ".map(r => r.innerText)")  # fmt: skip
+    assert rows[0].startswith("gravity") and "G" in rows[0]
+    assert "com_rise" in rows[1] and "m\t" in rows[1] and "spike at clip_end" in rows[1]
+    wait_until(lambda: "[" in _js(browser, "return document.querySelector("
+                                           "'#parameters tr[data-name=jump_height]').innerText"),
+               30, "the latest a'")  # fmt: skip
+    title = "return document.getElementById('task-map').layout.yaxis.title.text"
+    assert _js(browser, title) == "jump_height (m)"
     browser.save_screenshot(str(screenshots / "dashboard_skill.png"))
 
 

@@ -1,6 +1,7 @@
-"""Part 13 (first step): a clip is a file or a name. A user's DeepMimic-format clip file that is
-not in the repo trains on a real local Ray with the sampler in Redis; bad files fail before
-anything starts, naming the problem; `paramimic clip info` reads a file the same way."""
+"""Part 13: a clip is a file or a name. A user's DeepMimic-format clip file that is not in the
+repo, with two task parameters declared from the measure library, trains on a real local Ray
+with the sampler in Redis and reports a' for both; bad files fail before anything starts,
+naming the problem; `paramimic clip info` reads a file the same way and measures m0."""
 
 from __future__ import annotations
 
@@ -34,11 +35,11 @@ def _user_clip(tmp_path: Path, edit=None, name: str = "my_jump.txt") -> Path:
     return path
 
 
-def _config(tmp_path: Path, clip: Path) -> Path:
+def _config(tmp_path: Path, clip: Path, task: dict | None = None) -> Path:
     cfg = {
         "character": "humanoid",
         "env": {"clip": str(clip), "max_episode_seconds": 1.0},
-        "task": {"gravity": [0.8, 1.2]},
+        "task": task or {"gravity": [0.8, 1.2]},
         "ppo": {"num_steps": 256, "minibatch_size": 128, "num_epochs": 1},
         "actors": {"num_actors": 2, "num_envs": 2},
         "train": {"checkpoint_every": 100},
@@ -121,9 +122,29 @@ def test_truncated_and_missing_files_are_named(tmp_path):
         load_config(_config(tmp_path, tmp_path / "nowhere.txt"))
 
 
+# two parameters declared from the measure library, as a user would write them in YAML
+DECLARED = {
+    "gravity": [0.8, 1.2],
+    "rise": {"measure": "com_rise", "range": [0.0, 0.5]},
+    "kick": {"measure": "peak_end_effector_height", "body": "right_ankle", "range": [0.1, 1.0],
+             "reward": "continuous"},
+}  # fmt: skip
+
+
 def test_a_user_clip_trains_on_ray_with_the_sampler_in_redis(distributed, tmp_path):
-    cfg = load_config(_config(tmp_path, _user_clip(tmp_path)))
+    cfg = load_config(_config(tmp_path, _user_clip(tmp_path), DECLARED))
+    assert set(cfg.env.skill.measures) == {"rise", "kick"}
+    assert cfg.task["kick"] == (0.1, 1.0)
     trainer, backend = distributed(cfg, tmp_path)
     trainer.train(backend, total_steps=2 * 256)
     assert trainer.progress.iteration >= 2
-    assert trainer.curriculum.summary()["episodes"] > 0  # the sampler actor saw its episodes
+    summary = trainer.curriculum.summary()  # the sampler actor's, its state in Redis
+    assert summary["episodes"] > 0
+    # a' for both declared parameters, measured on the episodes (the untrained humanoid's
+    # ankles and COM move: not the commanded values, and inside the box)
+    achieved = summary["achieved"]
+    for name in ("rise", "kick"):
+        lo, hi = cfg.task[name]
+        a = achieved[name]
+        assert lo <= a["min"] <= a["mean"] <= a["max"] <= hi, (name, a)
+    assert achieved["kick"]["max"] > achieved["kick"]["min"]

@@ -27,6 +27,33 @@ class RunSummary(BaseModel):
     total_steps: int | None = None
 
 
+class TaskParameter(BaseModel):
+    """One dimension of the run's task space and what it means ([L21] §4.2, Table 1)."""
+
+    name: str
+    range: list[float] = Field(description="[min, max]; equal ends make it a constraint")
+    constraint: bool
+    kind: str = Field(
+        description="shape (a multiple of the base body's), condition (gravity), goal (target "
+        "velocity/direction) or measured (a measure of the motion, `env.skill.measures`)"
+    )
+    unit: str = Field(description="unit of the range ('reference': multiples of the clip's own)")
+    measure: str | None = Field(None, description="measured: its measure (paramimic.motion.measures)")
+    axis: str | None = None
+    body: str | None = None
+    window: list[float] | None = Field(None, description="share of the clip it looks at")
+    reward: str | None = Field(None, description="measured: spike or continuous task reward")
+    event: str | None = Field(None, description="spike: clip_end, takeoff or window_end")
+    sigma: float | None = None
+
+
+class RunDetail(RunSummary):
+    """A run: its summary, its whole validated config and its task parameters."""
+
+    config: dict = Field(description="the experiment config the run was started with")
+    parameters: list[TaskParameter]
+
+
 class CharacterInfo(BaseModel):
     """A run's character as the registry describes it."""
 
@@ -108,6 +135,9 @@ class Curriculum(BaseModel):
     task_ranges: dict[str, list[float]] | None = None
     history: list[dict[str, float]] | None = Field(
         None, description="ER against N (episodes), one point per finished batch"
+    )
+    achieved: dict[str, dict[str, float]] | None = Field(
+        None, description="a' of the latest episodes per parameter (hindsight): mean, min, max"
     )
     updated_at: float | None = None
 

@@ -27,6 +27,7 @@ from services.api.models import (
     HistoryPage,
     MarginalValueGrid,
     Progress,
+    RunDetail,
     RunSummary,
     SetK,
     TaskBatch,
@@ -144,6 +145,39 @@ async def list_runs(
             )
         )
     return runs
+
+
+@router.get("/runs/{run}", response_model=RunDetail, tags=["runs"])
+async def run_detail(run: RunId, r: RedisDep):
+    """One run: status, config and its task parameters by name, unit and meaning (measured
+    parameters with their measure, reward and event)."""
+    pipe = r.pipeline(transaction=False)
+    keys = RunKeys(run)
+    pipe.hmget(keys.meta, [*META_FIELDS, "config", "parameters"])
+    pipe.hmget(keys.progress, ["iteration", "env_steps"])
+    pipe.exists(keys.lease)
+    values, (iteration, env_steps), lease = await pipe.execute()
+    meta = dict(zip((*META_FIELDS, "config", "parameters"), values, strict=True))
+    if meta["status"] is None:
+        raise _not_found(run)
+    config = json.loads(meta["config"] or "{}")  # damaged JSON: 409 (app.damaged_state)
+    params = json.loads(meta["parameters"]) if meta["parameters"] else None
+    if params is None:  # runs registered before Part 13 stored ranges only
+        params = [{"name": n, "range": list(v), "constraint": v[0] == v[1], "kind": "unknown",
+                   "unit": ""} for n, v in config.get("task", {}).items()]  # fmt: skip
+    return RunDetail(
+        run_id=run,
+        name=meta["name"] or "",
+        character=meta["character"] or "",
+        status=live_status(meta["status"], lease),
+        started_at=float(meta["started_at"] or 0),
+        updated_at=float(meta["updated_at"] or 0),
+        iteration=_num(iteration, int),
+        env_steps=_num(env_steps, int),
+        total_steps=_num(meta["total_steps"], int),
+        config=config,
+        parameters=params,
+    )
 
 
 @router.get("/runs/{run}/character", response_model=CharacterInfo, tags=["runs"])

@@ -108,6 +108,7 @@ class RunReporter:
             "character": cfg.character,
             "character_info": dumps(registration(cfg.character).info()),
             "config": dumps(cfg.model_dump(mode="json")),
+            "parameters": dumps(cfg.parameters()),
             "status": "running",
             "run_dir": str(run_dir.resolve()),
             "total_steps": total_steps,

@@ -37,6 +37,27 @@ function curves() {
     Plotly.react("curve-" + key, [{x, y, mode: "lines", name: title}], layout(title), CONFIG);
   }
 }
+let PARAMS = {};  // name -> the run's task parameter (GET /runs/{run})
+const label = name => PARAMS[name] && PARAMS[name].unit ? `${name} (${PARAMS[name].unit})` : name;
+const esc = v => String(v).replace(/[&<>"]/g, ch => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"})[ch]);
+async function parameters() {
+  const run = await getJSON(`/runs/${RUN}`);
+  PARAMS = Object.fromEntries(run.parameters.map(p => [p.name, p]));
+}
+function parameterTable(achieved) {
+  const rows = Object.values(PARAMS).map(p => {
+    const what = p.measure ? p.measure + (p.axis ? ` about ${p.axis}` : "") +
+      (p.body ? ` of ${p.body}` : "") : p.kind;
+    const reward = p.reward ? (p.reward === "spike" ? `spike at ${p.event}` : "continuous") : "";
+    const a = (achieved || {})[p.name];
+    return `<tr data-name="${esc(p.name)}"><td><b>${esc(p.name)}</b></td>` +
+      `<td>${fmt(p.range[0], 3)} – ${fmt(p.range[1], 3)}</td><td class="unit">${esc(p.unit)}</td>` +
+      `<td>${esc(what)}${p.constraint ? " (constraint)" : ""}</td><td>${esc(reward)}</td>` +
+      `<td>${a ? `${fmt(a.mean, 3)} [${fmt(a.min, 3)}, ${fmt(a.max, 3)}]` : ""}</td></tr>`;
+  });
+  document.getElementById("parameters").innerHTML = "<tr><th>name</th><th>range</th><th>unit</th>" +
+    "<th>meaning</th><th>task reward</th><th>latest a′ mean [min, max]</th></tr>" + rows.join("");
+}
 function column(rows, names, name) {
   const i = names.indexOf(name);
   return rows.map(r => r[i]);
@@ -54,7 +75,7 @@ async function wl19(c) {
     {type: "scatter", mode: "markers", x: column(tasks, names, g.dims[0]),
      y: column(tasks, names, g.dims[1]), marker: {color: "red", size: 5}, name: "samples (S)"},
   ], layout(`V̄ over ${g.dims.join(" × ")}: μ = ${fmt(g.mu, 2)}, k = ${fmt(c.k, 2)}`,
-     {xaxis: {title: {text: g.dims[0]}}, yaxis: {title: {text: g.dims[1]}}}), CONFIG);
+     {xaxis: {title: {text: label(g.dims[0])}}, yaxis: {title: {text: label(g.dims[1])}}}), CONFIG);
 }
 async function l21(c) {
   const [e, d] = await Promise.all([getJSON(`/runs/${RUN}/curriculum/elites?limit=100000`),
@@ -76,7 +97,7 @@ async function l21(c) {
     marker: {color: e.items.map(i => i.fitness), colorscale: "Viridis", showscale: true,
              colorbar: {title: {text: "fitness"}, x: 1.12}, size: 7}});
   Plotly.react("task-map", traces, layout(`${e.total} elites: phase ${c.phase}, stage ${c.stage}`,
-    {xaxis: {title: {text: dims[0]}}, yaxis: {title: {text: dims[1]}}}), CONFIG);
+    {xaxis: {title: {text: label(dims[0])}}, yaxis: {title: {text: label(dims[1])}}}), CONFIG);
   const h = c.history || [];
   Plotly.react("er", [{x: h.map(p => p.episodes), y: h.map(p => p.explored_ratio),
     mode: "lines+markers", name: "ER"}], layout("explored ratio ER over episodes N",
@@ -99,8 +120,10 @@ async function tick() {
     ${fmt(last.actor_restarts || 0, 0)} · updated ${ago(p.updated_at)}`;
   const h = await getJSON(`/runs/${RUN}/history?since=${since}&limit=10000`);
   if (h.items.length) { history.push(...h.items); since = h.next_since; curves(); }
+  if (!Object.keys(PARAMS).length) { await parameters(); parameterTable(); }
   try {
     const c = await getJSON(`/runs/${RUN}/curriculum`);
+    parameterTable(c.achieved);
     document.getElementById("curriculum").textContent = c.phase ?
       `[L21] phase ${c.phase}, stage ${c.stage}, ER ${fmt(c.explored_ratio, 3)}, ` +
       `${c.elites} elites, P_θ loss ${fmt(c.motion_loss, 4)}` :
