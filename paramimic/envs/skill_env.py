@@ -120,7 +120,9 @@ class SkillEnv(EnvCore):
                 tuple(spec.window),
             )  # fmt: skip
             out.append(
-                TaskMeasure(i, name, measure, spec.reward, spec.resolved_event(), sigma or 0.1)
+                TaskMeasure(
+                    i, name, measure, spec.reward, spec.resolved_event(), float(sigma or 0.1)
+                )
             )
         return out
 
