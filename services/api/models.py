@@ -38,7 +38,7 @@ class TaskParameter(BaseModel):
         "velocity/direction) or measured (a measure of the motion, `env.skill.measures`)"
     )
     unit: str = Field(description="unit of the range ('reference': multiples of the clip's own)")
-    measure: str | None = Field(None, description="measured: its measure (paramimic.motion.measures)")
+    measure: str | None = Field(None, description="measured: its measure (motion.measures)")
     axis: str | None = None
     body: str | None = None
     window: list[float] | None = Field(None, description="share of the clip it looks at")
