@@ -1,5 +1,6 @@
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from paramimic.config import ConfigError, load_config
@@ -87,3 +88,27 @@ def test_physics_rate_defaults_to_the_characters_and_old_configs_keep_theirs(tmp
     assert (old.env.physics_hz, old.env.frame_skip) == (600, 20)
     chosen = load_config(_write(tmp_path, "character: quadruped\nenv: {physics_hz: 150}"))
     assert chosen.env.frame_skip == 5
+
+
+SKILL_CONFIGS = [p for p in CONFIGS if "clip:" in p.read_text()]
+
+
+@pytest.mark.parametrize("path", SKILL_CONFIGS, ids=lambda p: p.name)
+def test_shipped_skill_families_build_with_their_declared_measures(path):
+    """Part 13: each shipped [L21] family builds its env; every declared parameter is measured
+    (a0 from the clip inside the task box, `reference` units at 1)."""
+    import yaml
+
+    from paramimic.envs.skill_env import SkillEnv
+
+    cfg = load_config(path)
+    declared = {
+        k for k, v in yaml.safe_load(path.read_text())["task"].items() if isinstance(v, dict)
+    }
+    assert set(cfg.env.skill.measures) == declared
+    env = SkillEnv(cfg.character, cfg.task, cfg.env)
+    a0 = env.reference_task()
+    assert env.task_space.contains(a0).all()
+    for t in env.measured:
+        if t.measure.unit == "reference":
+            assert a0[t.index] == pytest.approx(np.clip(1.0, *cfg.task[t.name]))
