@@ -55,6 +55,7 @@ class Session:
             self.curriculum = new_curriculum(cfg, clip_setup(cfg))
             self.curriculum.from_state(state["curriculum"])
         self.shape_names = {n for n, _ in self.env._shape_idx}
+        self.units = {p["name"]: p["unit"] for p in cfg.parameters()}
         self.lock = threading.Lock()
         self.frame_ready = threading.Condition()
         self.jpeg, self.frame_id = b"", 0
@@ -178,7 +179,8 @@ class Session:
                 "kind": "skill" if self.skill else "family",
                 "task": task, "ranges": self.space.ranges(),
                 "shape_params": sorted(self.shape_names),
-                "goals": [n for n in self.space.names if n in TASK_GOALS],
+                "goals": [n for n in self.space.names if n not in self.shape_names],
+                "units": self.units,
                 "body": {"hip_height": float(body.hip_height),
                          "mass": float(self.env.model.body_mass.sum())},
                 "paused": self.paused, "follow": self.follow, "fallen": self.fell_at is not None,

@@ -117,6 +117,8 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
     with TestClient(create_app(skill)) as client:
         state = client.get("/state").json()
         assert state["kind"] == "skill" and set(state["task"]) == {"gravity", "jump_height"}
+        assert state["goals"] == ["gravity", "jump_height"]  # sliders with their units
+        assert state["units"] == {"gravity": "G", "jump_height": "m"}
         r = client.post("/perform", json={"values": {"jump_height": 0.4, "gravity": 0.8}})
         assert r.status_code == 200, r.text
         performed = skill.space.to_dict(skill.env._task)
