@@ -539,6 +539,8 @@ class ExperimentConfig(Section):
                     registration.load_clip(clip)
                 except (ValueError, KeyError) as e:
                     raise ValueError(f"env.clip: {e}") from None
+                # stored absolute: the run's saved config reads the same file from anywhere
+                object.__setattr__(self.env, "clip", str(Path(clip).expanduser().resolve()))
             else:
                 owners = _registry().clip_owners()
                 raise ValueError(

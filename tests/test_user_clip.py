@@ -148,3 +148,14 @@ def test_a_user_clip_trains_on_ray_with_the_sampler_in_redis(distributed, tmp_pa
         a = achieved[name]
         assert lo <= a["min"] <= a["mean"] <= a["max"] <= hi, (name, a)
     assert achieved["kick"]["max"] > achieved["kick"]["min"]
+
+
+def test_a_clip_path_is_stored_absolute_and_may_start_with_home(tmp_path, monkeypatch):
+    """`env.clip: ~/my_jump.txt` reads the user's file; the run's saved config holds the absolute
+    path, so a resume from another directory reads the same file."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    _user_clip(tmp_path)
+    cfg = load_config(_config(tmp_path, Path("~/my_jump.txt")))
+    assert cfg.env.clip == str(tmp_path.resolve() / "my_jump.txt")
+    monkeypatch.chdir(tmp_path)
+    assert load_config(_config(tmp_path, Path("my_jump.txt"))).env.clip == cfg.env.clip

@@ -95,14 +95,15 @@ class Registration:
         that cannot be read or does not fit raises ValueError naming the problem."""
         if clip in self.clips:
             return self.clips[clip]()
-        if self.clip_file is None or not Path(clip).suffix and not Path(clip).exists():
+        path = Path(clip).expanduser()
+        if self.clip_file is None or not path.suffix and not path.exists():
             files = "" if self.clip_file is None else ", or a clip file"
             raise ValueError(
                 f"clip {clip!r} does not fit {self.name!r}: it has {sorted(self.clips)}{files}"
             )
-        if not Path(clip).is_file():
+        if not path.is_file():
             raise ValueError(f"clip file {clip} does not exist")
-        return self.clip_file(Path(clip))
+        return self.clip_file(path)
 
     @property
     def title(self) -> str:
