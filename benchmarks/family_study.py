@@ -71,6 +71,12 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_gamma99": FROZEN | G99,
     "std_frozen_gamma99_k0": FROZEN | G99 | K0,
     "std_frozen_gamma99_widen": FROZEN | G99 | {"curriculum.widen": {}},
+    # every surviving recipe stands more than it walks (0.2 m/s): the COM-velocity term
+    # (w4, 1 of the walker's 14) weighed 4x, alone and with the widening range
+    "std_frozen_gamma99_vel4": FROZEN | G99 | {"env.reward.w_com_velocity": 4.0},
+    "std_frozen_gamma99_vel4_widen": FROZEN
+    | G99
+    | {"env.reward.w_com_velocity": 4.0, "curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the other target rows)
     "biped_base": FROZEN | G99,
     "biped_x0.5": FROZEN | G99,
