@@ -248,3 +248,11 @@ def test_a_zero_range_measure_is_a_constraint_in_the_fitness():
     assert turned == pytest.approx(abs(pitch) / (2 * np.pi), abs=0.01)
     # W_CONSTRAINT 0.1 x exp(-(turned / 0.5)²)
     assert f1["fitness"] - f0["fitness"] == pytest.approx(0.1 * np.exp(-((turned / 0.5) ** 2)))
+
+
+def test_a_reference_unit_needs_a_measure_the_clip_has():
+    """the walker's jump never turns its root: 'multiples of the clip's rotation' is refused."""
+    measures = {"turn": {"measure": "root_rotation", "axis": "yaw", "unit": "reference"}}
+    with pytest.raises(ValueError, match="task.turn: root_rotation is 0 on the clip"):
+        SkillEnv("walker", {"turn": (0.5, 2.0)},
+                 EnvConfig(clip="planar_jump", skill={"measures": measures}))  # fmt: skip

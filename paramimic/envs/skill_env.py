@@ -144,6 +144,12 @@ class SkillEnv(EnvCore):
         self.reference = self._reference_trajectory(self.clip.duration / dt, dt)
         # every measure's SI value on m0 for this body: the unit of `reference` parameters
         self._reference_si = {t.name: t.measure.si(self.reference) for t in self.measured}
+        for t in self.measured:
+            if t.measure.unit == "reference" and abs(self._reference_si[t.name]) < 1e-9:
+                raise ValueError(
+                    f"task.{t.name}: {t.measure.kind} is 0 on the clip {self.clip.name!r}, so "
+                    "`unit: reference` (multiples of it) means nothing; give an SI unit"
+                )
 
     def _kinematics(self, qpos: np.ndarray):
         """World end-effectors [n, E, 3], COM [n, 3] and each foot's lowest point [n, F]."""
