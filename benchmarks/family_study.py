@@ -77,6 +77,11 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_gamma99_vel4_widen": FROZEN
     | G99
     | {"env.reward.w_com_velocity": 4.0, "curriculum.widen": {}},
+    # standing still stops paying: the episode ends below half the target speed (2 s average)
+    "std_frozen_gamma99_stall": FROZEN | G99 | {"env.stall_speed_ratio": 0.5},
+    "std_frozen_gamma99_stall_widen": FROZEN
+    | G99
+    | {"env.stall_speed_ratio": 0.5, "curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the other target rows)
     "biped_base": FROZEN | G99,
     "biped_x0.5": FROZEN | G99,

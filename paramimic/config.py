@@ -185,6 +185,11 @@ class EnvConfig(Section):
         0.55, gt=0, lt=1, description="fall when the hip is below this share of its standing height"
     )
     max_pitch: PositiveFloat = Field(1.0, description="fall when the torso tilts more (rad)")
+    stall_speed_ratio: float | None = Field(
+        None, gt=0, le=1, description="end the episode when the COM's average velocity along "
+        "the target direction (over com_velocity_window) is below this share of the target "
+        "speed: standing still stops paying (a training device; evaluation runs without it)",
+    )  # fmt: skip
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
     reward: RewardConfig = RewardConfig()
     clip: str | None = Field(

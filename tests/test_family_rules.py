@@ -130,3 +130,21 @@ def test_the_observation_of_a_free_body_does_not_change_when_the_scene_turns():
     before = env._observe()
     _turned(env, 1.1)
     np.testing.assert_allclose(env._observe(), before, atol=1e-5)
+
+
+def test_a_stall_rule_ends_an_episode_that_stands_still():
+    """env.stall_speed_ratio: a fish holding its pose (zero action: it never falls, and it does
+    not swim) at its target speed is ended once a full velocity window (2 s) shows it below half
+    that speed; it is not a fall, and without the rule the same episode goes on."""
+    ends = {}
+    for ratio in (0.5, None):
+        env = make_env("fish", {}, {"stall_speed_ratio": ratio, "imitation": False})
+        env.reset(seed=0)
+        window = int(round(env.config.com_velocity_window / env.dt))
+        for t in range(1, 3 * window):
+            _, _, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
+            if terminated or truncated:
+                break
+        ends[ratio] = (t, terminated, info["fell"], info["stalled"])
+    assert ends[0.5] == (window, True, False, True)
+    assert ends[None] == (3 * window - 1, False, False, False)

@@ -262,16 +262,28 @@ class ParamEnv(EnvCore):
         self._last_obs = obs
         tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
         fell = not self.definition.swims and bool(self.root_height() < self._fall_height or tilted)
-        truncated = self._steps >= self._max_steps and not fell
+        stalled = not fell and self._stalled()
+        truncated = self._steps >= self._max_steps and not (fell or stalled)
         info = {
             "task": self._task.copy(),
             "fell": fell,
+            "stalled": stalled,
             "diverged": False,
             "dphi": 1.0,
             "reward_spike": 0.0,
             "reward_terms": terms,
         }
-        return obs, reward, fell, truncated, info
+        return obs, reward, fell or stalled, truncated, info
+
+    def _stalled(self) -> bool:
+        """`stall_speed_ratio`: after a full velocity window, the average COM velocity along the
+        target direction is below that share of the target speed."""
+        ratio = self.config.stall_speed_ratio
+        speed = abs(self._target_v)
+        if ratio is None or self._steps < self._window or speed < 1e-6:
+            return False
+        (dx, dy), (vx, vy, _) = self._target_dir, self._com_vel  # the direction carries the sign
+        return vx * dx + vy * dy < ratio * speed
 
     def _update_com_velocity(self) -> None:
         """[WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` s."""
