@@ -141,10 +141,11 @@ def test_a_stall_rule_ends_an_episode_that_stands_still():
         env = make_env("fish", {}, {"stall_speed_ratio": ratio, "imitation": False})
         env.reset(seed=0)
         window = int(round(env.config.com_velocity_window / env.dt))
-        for t in range(1, 3 * window):
+        steps = 0
+        for steps in range(1, 3 * window):  # noqa: B007 (the count is the result)
             _, _, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
             if terminated or truncated:
                 break
-        ends[ratio] = (t, terminated, info["fell"], info["stalled"])
+        ends[ratio] = (steps, terminated, info["fell"], info["stalled"])
     assert ends[0.5] == (window, True, False, True)
     assert ends[None] == (3 * window - 1, False, False, False)
