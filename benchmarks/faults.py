@@ -49,7 +49,7 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT))
-
+from benchmarks.markdown import markdown_table  # noqa: E402
 from services.keys import RunKeys  # noqa: E402
 from services.launch.redis_server import EmbeddedRedis  # noqa: E402
 
@@ -306,25 +306,21 @@ def _quietly(f) -> None:
 
 def table(rows: list[dict]) -> str:
     """The README's fault table."""
-    lines = [
-        "| fault | injected | outcome | episodes lost / double-counted | elites lost "
-        "| recovery s (mean, max) | processes left |",
-        "|---|---|---|---|---|---|---|",
-    ]
+    header = ["fault", "injected", "outcome", "episodes lost / double-counted", "elites lost",
+              "recovery s (mean, max)", "processes left"]  # fmt: skip
+    lines = []
     for r in rows:
         if "error" in r or "skipped" in r:
-            lines.append(f"| {r['fault']} | – | {r.get('error') or r.get('skipped')} | | | | |")
+            lines.append([r["fault"], "–", r.get("error") or r.get("skipped"), "", "", "", ""])
             continue
         outcomes = sorted(set(r["outcomes"]))
         counts = ", ".join(f"{r['outcomes'].count(o)}x {o}" for o in outcomes)
         secs = [x for x in r["recovery_seconds"] if x is not None]
         rec = f"{sum(secs) / len(secs):.1f}, {max(secs):.1f}" if secs else "–"
         left = ", ".join(r["processes_left"]) or "0"
-        lines.append(
-            f"| {r['fault']} | {r['injected']} | {counts} | {r['episodes_lost']} / "
-            f"{r['episodes_double_counted']} | {r['elites_lost']} | {rec} | {left} |"
-        )
-    return "\n".join(lines)
+        lost = f"{r['episodes_lost']} / {r['episodes_double_counted']}"
+        lines.append([r["fault"], r["injected"], counts, lost, r["elites_lost"], rec, left])
+    return markdown_table(header, lines)
 
 
 def main() -> None:

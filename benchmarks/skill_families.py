@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = RESULTS / "skill_families_runs"
 sys.path.insert(0, str(ROOT))
+from benchmarks.markdown import markdown_table  # noqa: E402
 
 # family -> ([L21] Table 1 skill, its episodes N, its ER); None where the paper has no such row
 FAMILIES = {
@@ -87,11 +88,9 @@ def one(job: tuple) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    lines = [
-        "| family | env steps | episodes N | stage / phase | ER | elites (mean F) | elites "
-        "cover (share of each free range) | [L21] Table 1: N, ER |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+    header = ["family", "env steps", "episodes N", "stage / phase", "ER", "elites (mean F)",
+              "elites cover (share of each free range)", "[L21] Table 1: N, ER"]  # fmt: skip
+    lines = []
     for r in rows:
         cover = ", ".join(
             f"{k} {'–' if v is None else f'{v:.2f}'}" for k, v in r["elite_spread"].items()
@@ -101,12 +100,11 @@ def table(rows: list[dict]) -> str:
             f"{p['skill']}: {p['episodes'] / 1e6:.2f}M, {p['explored_ratio']}"
         )  # fmt: skip
         fit = r["elite_mean_fitness"]
-        lines.append(
-            f"| {r['family']} | {r['steps'] / 1e6:.2f}M | {r['episodes']:,} | {r['stage']} / "
-            f"{r['phase']} | {r['explored_ratio']:.2f} | {r['elites']} "
-            f"({'–' if fit is None else f'{fit:.2f}'}) | {cover} | {paper} |"
-        )
-    return "\n".join(lines)
+        elites = f"{r['elites']} ({'–' if fit is None else f'{fit:.2f}'})"
+        lines.append([r["family"], f"{r['steps'] / 1e6:.2f}M", f"{r['episodes']:,}",
+                      f"{r['stage']} / {r['phase']}", f"{r['explored_ratio']:.2f}", elites,
+                      cover, paper])  # fmt: skip
+    return markdown_table(header, lines)
 
 
 def main() -> None:
