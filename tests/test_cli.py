@@ -160,7 +160,8 @@ def test_train_without_serial_runs_on_a_local_ray(tmp_path):
     cfg = tmp_path / "tiny.yaml"
     cfg.write_text(yaml.safe_dump({**TINY, "actors": {"num_actors": 1, "num_envs": 4}}))
     run = tmp_path / "run"
-    res = _cli("train", cfg, "--run-dir", run, env={**os.environ, "RAY_ADDRESS": ""})
+    res = _cli("train", cfg, "--run-dir", run, "--api-port", "0",  # any free port
+               env={**os.environ, "RAY_ADDRESS": ""})  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     assert "Ray: 1 rollout actors x 4 envs" in res.stdout
     last = json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])

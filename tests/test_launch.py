@@ -302,7 +302,7 @@ def test_an_external_redis_with_a_password_is_used_and_left_running(tmp_path):
         wrong = server.url.replace("pa55word", "wrong")
         res = subprocess.run(
             [sys.executable, "-m", "services.cli", "train", tmp_path / "tiny.yaml",
-             "--run-dir", tmp_path / "other", "--redis-url", wrong],  # fmt: skip
+             "--run-dir", tmp_path / "other", "--redis-url", wrong, "--api-port", "0"],  # fmt: skip
             capture_output=True, text=True, timeout=60, env=os.environ | {"COLUMNS": "200"},
         )  # fmt: skip
         assert res.returncode == 2 and "cannot use Redis at redis://:***@" in res.stdout
