@@ -46,6 +46,7 @@ G99 = {"ppo.gamma": 0.99}
 TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128}
 K0 = {"curriculum.k": 0.0}
 BASE_LEGS = "runs/study/base_legs_s{seed}"
+PRODUCT = {"env.reward.combine": "product"}
 VARIANTS: dict[str, dict] = {
     # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
     "learned_std": LEARNED | G95,
@@ -82,6 +83,10 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_gamma99_stall_widen": FROZEN
     | G99
     | {"env.stall_speed_ratio": 0.5, "curriculum.widen": {}},
+    # the bells multiplied, not added (env.reward.combine): standing still stops paying half
+    # of a walking step (the sum's end-effector, direction and torque bells)
+    "product": FROZEN | G99 | PRODUCT,
+    "product_g95": FROZEN | G95 | PRODUCT,
     # the winning recipe on the [WL19] §5.3 3D characters (the issue's other target rows)
     "biped_base": FROZEN | G99,
     "biped_x0.5": FROZEN | G99,

@@ -61,6 +61,11 @@ class RewardConfig(Section):
     normalize: bool = Field(
         True, description="scale velocity, direction and energy by the body ([WL19] §4.3)"
     )
+    combine: Literal["sum", "product"] = Field(
+        "sum",
+        description="sum: Eq. 4, the weighted mean of the bells; product: the bells multiplied "
+        "(terms of weight 0 left out), so that a step pays only as much as its worst term",
+    )
 
     def weights(self, table3: tuple[float, ...]) -> tuple[float, ...]:
         """w1..w6: the ones set here, the character's [WL19] Table 3 row for the others."""

@@ -28,6 +28,7 @@ from paramimic.envs.rewards import (
     wl19_imitation,
     wl19_regularization,
     wl19_reward,
+    wl19_reward_product,
     wl19_task,
     wl19_task_share,
     wl19_weights,
@@ -345,7 +346,8 @@ class ParamEnv(EnvCore):
             s[c.tau_sensor], c.torque_limit, rc.sigma_torque, self._scales.energy
         )
         terms = WL19Terms(pose, velocity, ee, com, direction, torque)
-        reward = wl19_reward(terms, self._weights)
+        combine = wl19_reward if rc.combine == "sum" else wl19_reward_product
+        reward = combine(terms, self._weights)
         reported = {
             "pose": pose,
             "velocity": velocity,

@@ -113,6 +113,27 @@ def wl19_reward(terms: WL19Terms, weights: WL19Weights) -> float:
     return imit + wl19_task_share(terms, weights) + weights.torque * terms.torque
 
 
+def wl19_reward_product(terms: WL19Terms, weights: WL19Weights) -> float:
+    """Eq. 4's bells multiplied instead of added: R = Π r_i over the terms whose weight is
+    non-zero (every end-effector's bell a factor), in (0, 1]. The sum pays a step for whatever
+    terms it meets (a body that stands still keeps the end-effector, direction and torque
+    bells: about half of a walking step's reward on the walker), so that surviving pays almost
+    as much as imitating; in the product a step is worth only as much as its worst term, as
+    later imitation work combines them (DReCon, Bergamin et al. 2019; Won, Gopinath and
+    Hodgins 2020)."""
+    r = 1.0
+    for bell, w in zip(
+        (terms.pose, terms.velocity, terms.com_velocity, terms.direction, terms.torque),
+        (weights.pose, weights.velocity, weights.com_velocity, weights.direction, weights.torque),
+        strict=True,
+    ):
+        if w > 0.0:
+            r *= bell
+    if weights.end_effector > 0.0:
+        r *= float(np.prod(terms.end_effector))
+    return r
+
+
 def l21_tracking(
     q_err: np.ndarray,
     ee_err: np.ndarray,
