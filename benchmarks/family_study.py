@@ -47,6 +47,7 @@ TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128
 K0 = {"curriculum.k": 0.0}
 BASE_LEGS = "runs/study/base_legs_s{seed}"
 PRODUCT = {"env.reward.combine": "product"}
+RETARGET = {"env.retarget": True}
 VARIANTS: dict[str, dict] = {
     # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
     "learned_std": LEARNED | G95,
@@ -87,6 +88,12 @@ VARIANTS: dict[str, dict] = {
     # of a walking step (the sum's end-effector, direction and torque bells)
     "product": FROZEN | G99 | PRODUCT,
     "product_g95": FROZEN | G95 | PRODUCT,
+    # every leg follows the base leg's hip-to-ankle path scaled by the shortest leg
+    # (env.retarget): a reference that bodies with legs of unequal length can follow
+    "retarget": FROZEN | G99 | RETARGET,
+    "retarget_g95": FROZEN | G95 | RETARGET,
+    "retarget_stall": FROZEN | G99 | RETARGET | {"env.stall_speed_ratio": 0.5},
+    "retarget_widen": FROZEN | G99 | RETARGET | {"curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the issue's other target rows)
     "biped_base": FROZEN | G99,
     "biped_x0.5": FROZEN | G99,

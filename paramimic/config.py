@@ -176,6 +176,12 @@ class EnvConfig(Section):
     max_episode_seconds: PositiveFloat = Field(30.0, description="time limit ([WL19] Table 2)")
     action_scale: PositiveFloat = Field(0.5, description="rad of PD target offset per unit action")
     imitation: bool = Field(True, description="follow the character's procedural reference motion")
+    retarget: bool = Field(
+        False,
+        description="planar characters: each leg follows the base leg's hip-to-ankle path "
+        "scaled by the body's shortest leg (paramimic/motion/retarget.py), so that bodies with "
+        "legs of unequal length get a reference they can follow",
+    )
     target_velocity: float = Field(1.0, description="target speed when the task space has none")
     target_direction: float = Field(
         0.0, description="target heading (rad) when the task space has none (3D characters)"
@@ -519,6 +525,11 @@ class ExperimentConfig(Section):
             )
         registration = _registry().registration(self.character)
         character = registration.character
+        if self.env.retarget and not (character.planar and character.legs):
+            raise ValueError(
+                f"env.retarget: only planar characters' legs are retargeted; {self.character!r} "
+                "is not planar"
+            )
         measures = self.env.skill.measures
         self._valid_measures(character)
         allowed = set(character.param_names()) | set(TASK_GOALS) | set(measures)

@@ -7,7 +7,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from paramimic.envs import ParamEnv
+from paramimic.config import ExperimentConfig
+from paramimic.envs import ParamEnv, make_env
 from paramimic.envs.rewards import (
     WL19Terms,
     l21_reward,
@@ -17,6 +18,7 @@ from paramimic.envs.rewards import (
     wl19_imitation,
     wl19_regularization,
     wl19_reward,
+    wl19_reward_product,
     wl19_task,
     wl19_weights,
 )
@@ -65,6 +67,28 @@ def test_wl19_weights_and_reward():
     assert wl19_reward(terms, w0) == pytest.approx(1.5 / 3)
     ones = WL19Terms(1.0, 1.0, np.ones(2), 1.0, 1.0, 1.0)
     assert wl19_reward(ones, w) == pytest.approx(1.0)  # the reward lies in (0, 1]
+
+
+def test_wl19_product_of_the_bells():
+    w = wl19_weights(5, 2, 2, 1, 1, 1, n_ee=2)
+    terms = WL19Terms(0.5, 0.25, np.array([0.9, 0.8]), 0.8, 0.6, 0.1)
+    # every bell a factor, each end-effector's too: 0.5 · 0.25 · 0.9 · 0.8 · 0.8 · 0.6 · 0.1
+    assert wl19_reward_product(terms, w) == pytest.approx(0.5 * 0.25 * 0.72 * 0.8 * 0.6 * 0.1)
+    # a term of weight 0 is left out (here the direction bell)
+    w_no_dir = wl19_weights(5, 2, 2, 1, 0, 1, n_ee=2)
+    assert wl19_reward_product(terms, w_no_dir) == pytest.approx(0.5 * 0.25 * 0.72 * 0.8 * 0.1)
+    # without a reference motion only the task and the torque bells
+    w0 = wl19_weights(5, 2, 2, 1, 1, 1, n_ee=2, imitation=False)
+    assert wl19_reward_product(terms, w0) == pytest.approx(0.8 * 0.6 * 0.1)
+    ones = WL19Terms(1.0, 1.0, np.ones(2), 1.0, 1.0, 1.0)
+    assert wl19_reward_product(ones, w) == pytest.approx(1.0)
+    # a body that stands still meets the end-effector, direction and torque bells: the sum
+    # still pays it half of a walking step, the product a twentieth (terms as measured on the
+    # walker: a standing and a walking controller, README "Families that learn")
+    stand = WL19Terms(0.39, 0.17, np.array([0.86, 0.86]), 0.28, 1.0, 0.63)
+    walk = WL19Terms(0.91, 0.46, np.array([1.0, 1.0]), 0.97, 1.0, 0.38)
+    assert wl19_reward(stand, w) / wl19_reward(walk, w) > 0.6
+    assert wl19_reward_product(stand, w) / wl19_reward_product(walk, w) < 0.1
 
 
 def test_l21_tracking_task_and_mix():
@@ -122,3 +146,21 @@ def test_param_env_reward_on_a_state_built_by_hand():
     assert terms["com_velocity"] == pytest.approx(com)
     # Eq. 4 with Table 3 weights, w3 = 2 per foot: (5 + 2 + 2·2 + 1·com + 1·1 + 1·torque) / 14
     assert reward == pytest.approx((5 + 2 + 4 + com + 1 + torque) / 14, rel=1e-6)
+
+
+def test_param_env_pays_the_product_when_configured():
+    cfg = ExperimentConfig.model_validate(
+        {"character": "walker", "env": {"reward": {"combine": "product"}}}
+    )
+    env = make_env(cfg.character, cfg.task, cfg.env)
+    env.reset(seed=0)
+    sigma = env.config.reward.sigma_end_effector
+    for _ in range(3):
+        ref = env._ref_next.copy()  # the reference this step is rewarded against
+        _, reward, *_, info = env.step(np.zeros(env.action_space.shape))
+        t = info["reward_terms"]
+        err = (env.data.sensordata[env._ee] - ref[env._ee]).reshape(-1, 3)
+        feet = np.exp(-(err**2).sum(axis=1) / (sigma * 3))  # Eq. 5, one bell per foot
+        assert feet.sum() == pytest.approx(t["end_effector"])
+        product = t["pose"] * t["velocity"] * t["com_velocity"] * t["direction"] * t["torque"]
+        assert reward == pytest.approx(product * feet.prod(), rel=1e-9)

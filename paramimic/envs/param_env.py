@@ -33,6 +33,7 @@ from paramimic.envs.rewards import (
     wl19_task_share,
     wl19_weights,
 )
+from paramimic.motion.retarget import RetargetedGait, planar_legs
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
@@ -49,7 +50,7 @@ class ParamEnv(EnvCore):
         gait = self.registration.gait
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
-        self.motion = gait if self.config.imitation else None
+        self._gait = self.motion = gait if self.config.imitation else None
         self._action_scale = self.config.action_scale
         self._min_up = math.cos(self.config.max_pitch)  # the root's z axis may tilt this far
         self._free = not self.definition.planar
@@ -105,6 +106,9 @@ class ParamEnv(EnvCore):
             if self.config.reward.normalize
             else RewardScales.identity()
         )
+        if self.motion is not None and self.config.retarget:
+            legs = planar_legs(self.definition, body.segment_lengths, base.segment_lengths)
+            self.motion = RetargetedGait(self._gait, legs)
         self._reference = self._tabulate_reference() if self.motion is not None else None
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
