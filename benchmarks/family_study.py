@@ -91,6 +91,7 @@ VARIANTS: dict[str, dict] = {
     # every leg follows the base leg's hip-to-ankle path scaled by the shortest leg
     # (env.retarget): a reference that bodies with legs of unequal length can follow
     "retarget": FROZEN | G99 | RETARGET,
+    "retarget_k0": FROZEN | G99 | RETARGET | K0,
     "retarget_g95": FROZEN | G95 | RETARGET,
     "retarget_stall": FROZEN | G99 | RETARGET | {"env.stall_speed_ratio": 0.5},
     "retarget_widen": FROZEN | G99 | RETARGET | {"curriculum.widen": {}},
