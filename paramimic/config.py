@@ -530,6 +530,11 @@ class ExperimentConfig(Section):
                 f"env.retarget: only planar characters' legs are retargeted; {self.character!r} "
                 "is not planar"
             )
+        if self.env.retarget and self.env.clip is not None:
+            raise ValueError(
+                "env.retarget: retargets the character's [WL19] gait (env.clip unset); [L21] "
+                "skills adapt their clip by the motion displacement of P_θ"
+            )
         measures = self.env.skill.measures
         self._valid_measures(character)
         allowed = set(character.param_names()) | set(TASK_GOALS) | set(measures)

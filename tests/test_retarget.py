@@ -111,3 +111,10 @@ def test_the_env_imitates_the_retargeted_gait_and_refuses_3d_characters():
     assert pose_bell(env) > 2.0 * pose_bell(plain)
     with pytest.raises(ValueError, match="env.retarget"):
         ExperimentConfig.model_validate({"character": "biped_lower", "env": {"retarget": True}})
+
+
+def test_retarget_is_refused_for_a_skill_clip():
+    with pytest.raises(ValueError, match="env.retarget"):
+        ExperimentConfig.model_validate(
+            {"character": "walker", "env": {"retarget": True, "clip": "planar_jump"}}
+        )
