@@ -99,6 +99,10 @@ VARIANTS: dict[str, dict] = {
     "retarget_widen": FROZEN | G99 | RETARGET | {"curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the other target rows)
     "biped_base": FROZEN | G99,
+    # the base biped turns away from its target and falls after it (probe: headings up to 3 rad
+    # before its falls at 3-10 s): the episode ends once it faces farther than the limit away
+    "biped_base_heading0.5": FROZEN | G99 | {"env.heading_error_limit": 0.5},
+    "biped_base_heading0.8": FROZEN | G99 | {"env.heading_error_limit": 0.8},
     "biped_x0.5": FROZEN | G99,
     "quadruped_x0.5": FROZEN | G99,
 }
@@ -106,6 +110,8 @@ VARIANTS: dict[str, dict] = {
 # body, lo' = 1 - s(1 - lo), hi' = 1 + s(hi - 1); s = 0 is the base body alone)
 OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_base": ("configs/biped_lower.yaml", 0.0),
+    "biped_base_heading0.5": ("configs/biped_lower.yaml", 0.0),
+    "biped_base_heading0.8": ("configs/biped_lower.yaml", 0.0),
     "biped_x0.5": ("configs/biped_lower.yaml", 0.5),
     "quadruped_x0.5": ("configs/quadruped.yaml", 0.5),
 }

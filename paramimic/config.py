@@ -6,6 +6,7 @@ documented once, here; numbers from the papers name their source.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -200,6 +201,12 @@ class EnvConfig(Section):
         None, gt=0, le=1, description="end the episode when the COM's average velocity along "
         "the target direction (over com_velocity_window) is below this share of the target "
         "speed: standing still stops paying (a training device; evaluation runs without it)",
+    )  # fmt: skip
+    heading_error_limit: float | None = Field(
+        None, gt=0, le=math.pi, description="3D characters: end the episode when the facing "
+        "direction is farther than this from the target direction (rad): a body that has "
+        "turned away stops collecting the imitation terms (a training device like "
+        "stall_speed_ratio; evaluation runs without it)",
     )  # fmt: skip
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
     reward: RewardConfig = RewardConfig()

@@ -149,3 +149,28 @@ def test_a_stall_rule_ends_an_episode_that_stands_still():
         ends[ratio] = (steps, terminated, info["fell"], info["stalled"])
     assert ends[0.5] == (window, True, False, True)
     assert ends[None] == (3 * window - 1, False, False, False)
+
+
+def test_a_heading_rule_ends_an_episode_that_turned_away_from_its_target():
+    """env.heading_error_limit: a biped whose target direction is set 1.2 rad away from where
+    it faces ends its episode at the next step (not a fall); with a limit wider than the turn,
+    or without the rule, it goes on; planar bodies have no heading to lose."""
+    task = {"target_direction": (0.0, 0.0), "target_velocity": (1.0, 1.0)}
+    ends = {}
+    for limit in (1.0, 1.4, None):
+        env = make_env("biped_lower", task, {"heading_error_limit": limit})
+        env.reset(seed=0)
+        xmat = env.data.xmat[env.character.root_body_id]
+        facing = math.atan2(xmat[3], xmat[0])
+        env.set_goal("target_direction", facing + 1.2)
+        _, _, terminated, _, info = env.step(np.zeros(env.action_space.shape))
+        ends[limit] = (terminated, info["off_course"], info["fell"])
+    assert ends == {
+        1.0: (True, True, False),
+        1.4: (False, False, False),
+        None: (False, False, False),
+    }
+    walker = make_env("walker", {}, {"heading_error_limit": 0.1})
+    walker.reset(seed=0)
+    walker._target_dir = (-1.0, 0.0)  # behind it: a planar body cannot turn, so no rule
+    assert not walker.step(np.zeros(walker.action_space.shape))[4]["off_course"]

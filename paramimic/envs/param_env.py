@@ -268,17 +268,20 @@ class ParamEnv(EnvCore):
         tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
         fell = not self.definition.swims and bool(self.root_height() < self._fall_height or tilted)
         stalled = not fell and self._stalled()
-        truncated = self._steps >= self._max_steps and not (fell or stalled)
+        off_course = not (fell or stalled) and self._off_course()
+        ended = fell or stalled or off_course
+        truncated = self._steps >= self._max_steps and not ended
         info = {
             "task": self._task.copy(),
             "fell": fell,
             "stalled": stalled,
+            "off_course": off_course,
             "diverged": False,
             "dphi": 1.0,
             "reward_spike": 0.0,
             "reward_terms": terms,
         }
-        return obs, reward, fell or stalled, truncated, info
+        return obs, reward, ended, truncated, info
 
     def _stalled(self) -> bool:
         """`stall_speed_ratio`: after a full velocity window, the average COM velocity along the
@@ -289,6 +292,20 @@ class ParamEnv(EnvCore):
             return False
         (dx, dy), (vx, vy, _) = self._target_dir, self._com_vel  # the direction carries the sign
         return vx * dx + vy * dy < ratio * speed
+
+    def _off_course(self) -> bool:
+        """`heading_error_limit`: a free body's facing direction (the root's x axis in the
+        ground plane) is farther than that angle from the target direction."""
+        limit = self.config.heading_error_limit
+        if limit is None or not self._free:
+            return False
+        xmat = self.data.xmat[self.character.root_body_id]
+        fx, fy = xmat[0], xmat[3]
+        norm = math.hypot(fx, fy)
+        if norm < 1e-9:  # facing straight up or down: no heading
+            return False
+        dx, dy = self._target_dir
+        return (fx * dx + fy * dy) / norm < math.cos(limit)
 
     def _update_com_velocity(self) -> None:
         """[WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` s."""
@@ -304,6 +321,8 @@ class ParamEnv(EnvCore):
         info = {
             "task": self._task.copy(),
             "fell": False,
+            "stalled": False,
+            "off_course": False,
             "diverged": True,
             "dphi": 1.0,
             "reward_spike": 0.0,
