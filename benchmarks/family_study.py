@@ -49,6 +49,7 @@ K0 = {"curriculum.k": 0.0}
 BASE_LEGS = "runs/study/base_legs_s{seed}"
 PRODUCT = {"env.reward.combine": "product"}
 RETARGET = {"env.retarget": True}
+STALL = {"env.stall_speed_ratio": 0.5}
 VARIANTS: dict[str, dict] = {
     # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
     "learned_std": LEARNED | G95,
@@ -95,7 +96,8 @@ VARIANTS: dict[str, dict] = {
     "retarget": FROZEN | G99 | RETARGET,
     "retarget_k0": FROZEN | G99 | RETARGET | K0,
     "retarget_g95": FROZEN | G95 | RETARGET,
-    "retarget_stall": FROZEN | G99 | RETARGET | {"env.stall_speed_ratio": 0.5},
+    "retarget_stall": FROZEN | G99 | RETARGET | STALL,
+    "retarget_stall_k0": FROZEN | G99 | RETARGET | STALL | K0,
     "retarget_widen": FROZEN | G99 | RETARGET | {"curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the issue's other target rows)
     "biped_base": FROZEN | G99,
