@@ -118,3 +118,19 @@ def test_retarget_is_refused_for_a_skill_clip():
         ExperimentConfig.model_validate(
             {"character": "walker", "env": {"retarget": True, "clip": "planar_jump"}}
         )
+
+
+def test_a_shape_change_on_the_fly_retargets_the_reference():
+    """[WL19] §5.2 with env.retarget: the reference the env imitates after `set_shape` is the new
+    body's retargeted gait, at the same phase."""
+    legs = {"left_leg_length": (0.7, 1.3), "right_leg_length": (0.7, 1.3)}
+    env = make_env("walker", legs, {"retarget": True})
+    env.reset(seed=0, options={"task": {"left_leg_length": 1.0, "right_leg_length": 1.0}})
+    for _ in range(5):
+        env.step(np.zeros(6))
+    phase = env._phase
+    env.set_shape({"left_leg_length": 1.25, "right_leg_length": 0.75})
+    assert env._phase == phase
+    _, _, gait = _gait({"left_leg_length": 1.25, "right_leg_length": 0.75})
+    np.testing.assert_allclose(env._reference_at(phase)[:6], gait.pose(phase), atol=2e-3)
+    assert not np.allclose(gait.pose(phase), WALKER_GAIT.pose(phase), atol=1e-2)
