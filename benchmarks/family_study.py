@@ -10,6 +10,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py queue std_frozen,kl_adaptive --seeds 0 --steps 2000000
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
+    python benchmarks/family_study.py reference   # the pose bell of every body on its reference
 
 Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
 the training curve); `merge` writes study.json: per variant and budget, mean and spread over
@@ -279,9 +280,40 @@ def _plot(groups: dict) -> None:
     fig.savefig(RESULTS / "study_curves.png", dpi=90)
 
 
+REFERENCE_BODIES = ((1.0, 1.0), (0.8, 0.8), (1.2, 1.2), (0.8, 1.2), (1.2, 0.8), (0.7, 1.3))
+
+
+def reference(resets: int = 10, steps: int = 10) -> dict:
+    """How well each body can follow its reference at all: the servos' PD targets on the
+    reference pose (zero action) for `steps` control steps from `resets` resets, the mean [WL19]
+    pose bell (Eq. 5), with and without env.retarget. Writes study_reference_pose.json."""
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+
+    rows = []
+    for left, right in REFERENCE_BODIES:
+        row = {"left_leg_length": left, "right_leg_length": right}
+        for retarget in (False, True):
+            cfg = load_config(ROOT / CONFIG, {"env.retarget": retarget})
+            env = make_env(cfg.character, cfg.task, cfg.env)
+            task = {"left_leg_length": left, "right_leg_length": right, "target_velocity": 1.0}
+            bells = []
+            for seed in range(resets):
+                env.reset(seed=seed, options={"task": task})
+                for _ in range(steps):
+                    bells.append(env.step(np.zeros(env.action_space.shape))[4]["reward_terms"])
+            key = "retargeted" if retarget else "reference"
+            row[f"pose_bell_{key}"] = float(np.mean([b["pose"] for b in bells]))
+        rows.append(row)
+    report = {"resets": resets, "steps": steps, "config": CONFIG, "bodies": rows}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "study_reference_pose.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("command", choices=["run", "queue", "merge", "probe"])
+    ap.add_argument("command", choices=["run", "queue", "merge", "probe", "reference"])
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
@@ -293,6 +325,11 @@ def main() -> None:
             raise SystemExit(f"unknown variant {v!r}; variants: {sorted(VARIANTS)}")
     if args.command == "merge":
         merge()
+    elif args.command == "reference":
+        for row in reference()["bodies"]:
+            print(f"legs {row['left_leg_length']}/{row['right_leg_length']}: pose bell "
+                  f"{row['pose_bell_reference']:.3f} on the reference, "
+                  f"{row['pose_bell_retargeted']:.3f} retargeted")  # fmt: skip
     elif args.command == "probe":
         r = probe(args.variants, args.seed)
         print(f"{args.variants} s{args.seed} on {CONFIG}: falls {r['fall_percent']:.1f} %")
