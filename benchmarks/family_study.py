@@ -250,6 +250,18 @@ def merge() -> dict:
     return table
 
 
+# the training curves drawn in study_curves.png: one line of recipes per step of the study
+CURVES = (
+    "learned_std",
+    "std_frozen",
+    "std_frozen_gamma99",
+    "std_frozen_gamma99_stall_widen",
+    "retarget",
+    "retarget_stall",
+    "retarget_stall_k0",
+)
+
+
 def _plot(groups: dict) -> None:
     import matplotlib
 
@@ -258,7 +270,7 @@ def _plot(groups: dict) -> None:
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    variants = sorted({v for v, _ in groups if v not in OTHER_CONFIGS})
+    variants = [v for v in CURVES if any(v == g for g, _ in groups)]
     for i, variant in enumerate(variants):
         runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
         for j, r in enumerate(runs):
