@@ -39,7 +39,7 @@ EVAL_SEED = 2024  # never a training seed
 EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
 # Every variant states the knobs the study varies, so that it means the same whatever the
-# config ships (configs/walker_legs.yaml now carries the winner, `retarget`); a variant that
+# config ships (configs/walker_legs.yaml now carries the winner, `retarget_stall`); a variant that
 # does not name env.retarget runs without it (`variant_config`), as it was measured.
 LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
@@ -92,8 +92,8 @@ VARIANTS: dict[str, dict] = {
     "product": FROZEN | G99 | PRODUCT,
     "product_g95": FROZEN | G95 | PRODUCT,
     # every leg follows the base leg's hip-to-ankle path scaled by the shortest leg
-    # (env.retarget): a reference that bodies with legs of unequal length can follow. The
-    # winner: what configs/walker_legs.yaml ships; `retarget_k0` its uniform-sampling twin
+    # (env.retarget): a reference that bodies with legs of unequal length can follow; with the
+    # stall rule, the winner: what configs/walker_legs.yaml ships (`_k0`: uniform sampling)
     "retarget": FROZEN | G99 | RETARGET,
     "retarget_k0": FROZEN | G99 | RETARGET | K0,
     "retarget_g95": FROZEN | G95 | RETARGET,

@@ -282,7 +282,7 @@ def _brief(r: dict) -> dict:
 
 # configs/walker_legs.yaml's recipe as a family_study variant, its uniform-sampling twin (k = 0)
 # and the budget (millions of env steps) their rows are measured at
-SHIPPED = ("retarget", "retarget_k0", 2)
+SHIPPED = ("retarget_stall", "retarget_stall_k0", 2)
 
 
 def _study(variant: str, millions: int, seeds=(0, 1, 2)) -> list[dict]:
