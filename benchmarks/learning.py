@@ -161,10 +161,11 @@ def _train_sb3(steps: int, run_dir: Path, seed: int) -> dict:
     def act(obs: np.ndarray) -> np.ndarray:
         return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
-    probe = make_env(cfg.character, cfg.task, cfg.env)
+    env_cfg = cfg.env.for_evaluation()
+    probe = make_env(cfg.character, cfg.task, env_cfg)
     report = evaluate(
         act,
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        lambda: make_env(cfg.character, cfg.task, env_cfg),
         probe.task_space,
         EVAL_EPISODES,
         EVAL_SEED,

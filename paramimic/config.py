@@ -236,6 +236,14 @@ class EnvConfig(Section):
             )
         return self
 
+    def for_evaluation(self, max_episode_seconds: float | None = None) -> EnvConfig:
+        """This section as evaluation, rendering and play run it: whole episodes, without the
+        training devices that end an episode early (stall_speed_ratio, heading_error_limit)."""
+        update = {"stall_speed_ratio": None, "heading_error_limit": None}
+        if max_episode_seconds is not None:
+            update["max_episode_seconds"] = max_episode_seconds
+        return self.model_copy(update=update)
+
     def with_rate(self, physics_hz: int) -> EnvConfig:
         """This section with `physics_hz` (and its frame_skip) filled in, validated."""
         return EnvConfig.model_validate(self.model_dump() | {"physics_hz": physics_hz})

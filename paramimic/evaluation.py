@@ -159,10 +159,7 @@ def evaluate_config(
     grid over the config's display dims."""
     from paramimic.envs import make_env
 
-    env_cfg = cfg.env.model_copy(  # whole episodes: stall and heading rules are for training
-        update={"max_episode_seconds": seconds or cfg.env.max_episode_seconds,
-                "stall_speed_ratio": None, "heading_error_limit": None}
-    )  # fmt: skip
+    env_cfg = cfg.env.for_evaluation(seconds)
     space = make_env(cfg.character, cfg.task, env_cfg).task_space
     return evaluate(
         deterministic(policy),

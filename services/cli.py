@@ -275,8 +275,7 @@ def _load_policy(run: Path, seconds: float | None = None):
     except (FileNotFoundError, checkpoint.CheckpointError) as e:
         _fail(str(e))
     cfg = ExperimentConfig.model_validate(state["config"])
-    if seconds is not None:
-        cfg.env.max_episode_seconds = seconds
+    cfg.env = cfg.env.for_evaluation(seconds)  # whole episodes: no training-only stall rules
     policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
     policy.load_state_dict(state["learner"]["policy"])
     policy.eval()

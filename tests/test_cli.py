@@ -166,3 +166,30 @@ def test_train_without_serial_runs_on_a_local_ray(tmp_path):
     assert "Ray: 1 rollout actors x 4 envs" in res.stdout
     last = json.loads((run / "metrics.jsonl").read_text().splitlines()[-1])
     assert last["iteration"] == 2 and last["actors"] == 1 and last["actor_restarts"] == 0
+
+
+def test_eval_runs_whole_episodes_without_the_training_only_stall_rule(tmp_path):
+    """A run trained with a stall rule (a fish that never falls, ended in training once its
+    0.5-s average speed is below its target speed) is evaluated on whole episodes."""
+    fish = {
+        "character": "fish",
+        "task": {"target_velocity": [1, 1]},
+        "env": {
+            "imitation": False,
+            "max_episode_seconds": 2.0,
+            "com_velocity_window": 0.5,
+            "stall_speed_ratio": 1.0,
+        },
+        "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1},
+        "actors": {"num_envs": 4},
+        "train": {"total_steps": 512, "checkpoint_every": 1},
+    }
+    _, run = _train_serial(tmp_path, fish)
+    metrics = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    assert max(m["mean_length"] for m in metrics) < 0.5 * 2.0 * 30  # training episodes stalled
+    out = tmp_path / "eval.json"
+    res = _cli("eval", run, "--episodes", 4, "--grid", 1, "--seed", 1, "--out", out)
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads(out.read_text())
+    assert report["fall_percent"] == 0.0
+    assert report["mean_length_seconds"] == 2.0  # every episode to its horizon

@@ -119,8 +119,7 @@ def wl19_reward_product(terms: WL19Terms, weights: WL19Weights) -> float:
     terms it meets (a body that stands still keeps the end-effector, direction and torque
     bells: about half of a walking step's reward on the walker), so that surviving pays almost
     as much as imitating; in the product a step is worth only as much as its worst term, as
-    later imitation work combines them (DReCon, Bergamin et al. 2019; Won, Gopinath and
-    Hodgins 2020)."""
+    later imitation work combines them (e.g. Won, Gopinath and Hodgins 2020)."""
     r = 1.0
     for bell, w in zip(
         (terms.pose, terms.velocity, terms.com_velocity, terms.direction, terms.torque),
