@@ -11,6 +11,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
     python benchmarks/family_study.py reference   # the pose bell of every body on its reference
+    python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
 
 Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
 the training curve); `merge` writes study.json: per variant and budget, mean and spread over
@@ -292,6 +293,52 @@ def _plot(groups: dict) -> None:
     fig.savefig(RESULTS / "study_curves.png", dpi=90)
 
 
+def headings(variant: str, seed: int, episodes: int = 20) -> dict:
+    """A study run's controller (latest checkpoint) on its own config's env, whole episodes
+    from random initial states: per episode whether and when it fell and the largest angle
+    between its facing direction and the target direction. Writes
+    study_headings_<variant>_s<seed>.json."""
+    warnings.filterwarnings("ignore")
+    from paramimic.config import ExperimentConfig
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic
+    from paramimic.rl.networks import ActorCritic
+    from services.learner import checkpoint
+
+    state = checkpoint.load(RUNS / f"{variant}_s{seed}")
+    cfg = ExperimentConfig.model_validate(state["config"])
+    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy.load_state_dict(state["learner"]["policy"])
+    act = deterministic(policy)
+    env = make_env(cfg.character, cfg.task, cfg.env.for_evaluation(10.0))
+    rows = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=EVAL_SEED + i)
+        worst = 0.0
+        while True:
+            obs, _, terminated, truncated, info = env.step(act(obs[None])[0])
+            xmat = env.data.xmat[env.character.root_body_id]
+            facing = math.atan2(xmat[3], xmat[0])
+            target = math.atan2(env._target_dir[1], env._target_dir[0])
+            error = abs((facing - target + math.pi) % (2 * math.pi) - math.pi)
+            worst = max(worst, error)
+            if terminated or truncated:
+                break
+        rows.append(
+            {"fell": bool(info["fell"]), "seconds": env.sim_time, "max_heading_error": worst}
+        )
+    fallen = [r for r in rows if r["fell"]]
+    report = {
+        "variant": variant,
+        "seed": seed,
+        "episodes": rows,
+        "max_heading_error_fallen": [r["max_heading_error"] for r in fallen],
+        "max_heading_error_standing": [r["max_heading_error"] for r in rows if not r["fell"]],
+    }
+    (RESULTS / f"study_headings_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
 REFERENCE_BODIES = ((1.0, 1.0), (0.8, 0.8), (1.2, 1.2), (0.8, 1.2), (1.2, 0.8), (0.7, 1.3))
 
 
@@ -325,7 +372,7 @@ def reference(resets: int = 10, steps: int = 10) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("command", choices=["run", "queue", "merge", "probe", "reference"])
+    ap.add_argument("command", choices=["run", "queue", "merge", "probe", "reference", "headings"])
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
@@ -337,6 +384,11 @@ def main() -> None:
             raise SystemExit(f"unknown variant {v!r}; variants: {sorted(VARIANTS)}")
     if args.command == "merge":
         merge()
+    elif args.command == "headings":
+        r = headings(args.variants, args.seed)
+        for row in r["episodes"]:
+            print(f"{'fell' if row['fell'] else 'up  '} at {row['seconds']:5.2f} s, largest "
+                  f"heading error {row['max_heading_error']:.2f} rad")  # fmt: skip
     elif args.command == "reference":
         for row in reference()["bodies"]:
             print(f"legs {row['left_leg_length']}/{row['right_leg_length']}: pose bell "
