@@ -96,11 +96,8 @@ VARIANTS: dict[str, dict] = {
     # (env.retarget): a reference that bodies with legs of unequal length can follow; with the
     # stall rule, the winner: what configs/walker_legs.yaml ships (`_k0`: uniform sampling)
     "retarget": FROZEN | G99 | RETARGET,
-    "retarget_k0": FROZEN | G99 | RETARGET | K0,
-    "retarget_g95": FROZEN | G95 | RETARGET,
     "retarget_stall": FROZEN | G99 | RETARGET | STALL,
     "retarget_stall_k0": FROZEN | G99 | RETARGET | STALL | K0,
-    "retarget_widen": FROZEN | G99 | RETARGET | {"curriculum.widen": {}},
     # the winning recipe on the [WL19] §5.3 3D characters (the other target rows)
     "biped_base": FROZEN | G99,
     # the base biped turns away from its target and falls after it (`headings biped_base`: 16 of
