@@ -6,9 +6,8 @@ the reference, the body stands high on its long leg and drops onto its short one
 controller can both imitate and walk (the pose bell of the walker 0.8/1.2 is 0.06 under the
 reference's own PD targets, against 0.39 for the base body). Retargeted, every leg follows the
 base leg's hip-to-ankle path scaled by the body's *shortest* leg (the scale every leg can reach):
-a long leg bends its knee more, as a person with legs of unequal length flexes the long one;
-the foot keeps its angle to the ground. On a body whose legs are all scaled alike the
-retargeted gait is the reference itself.
+a long leg bends its knee more, and each foot keeps its angle to the torso (hip + knee +
+ankle). On a body whose legs are all scaled alike the retargeted gait is the reference itself.
 
 Legs are planar hinge chains hip - knee - ankle whose angles add up (a leg hanging straight at
 0, the knee bending one way only); the ankle position relative to the hip is
