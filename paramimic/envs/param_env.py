@@ -299,13 +299,19 @@ class ParamEnv(EnvCore):
         limit = self.config.heading_error_limit
         if limit is None or not self._free:
             return False
-        xmat = self.data.xmat[self.character.root_body_id]
-        fx, fy = xmat[0], xmat[3]
-        norm = math.hypot(fx, fy)
-        if norm < 1e-9:  # facing straight up or down: no heading
+        fx, fy = self._facing()
+        if fx == fy == 0.0:  # facing straight up or down: no heading
             return False
         dx, dy = self._target_dir
-        return (fx * dx + fy * dy) / norm < math.cos(limit)
+        return fx * dx + fy * dy < math.cos(limit)
+
+    def _facing(self) -> tuple[float, float]:
+        """The facing direction d: the root's x axis in the ground plane, of unit length ((0, 0)
+        when the root's x axis is vertical)."""
+        xmat = self.data.xmat[self.character.root_body_id]
+        fx, fy = xmat[0], xmat[3]
+        norm = math.hypot(fx, fy) or 1.0
+        return fx / norm, fy / norm
 
     def _update_com_velocity(self) -> None:
         """[WL19] Eq. 6 uses the COM velocity averaged over the last `com_velocity_window` s."""
@@ -353,14 +359,11 @@ class ParamEnv(EnvCore):
             rc.sigma_velocity,
             rc.sigma_end_effector,
         )
-        # facing direction d: the root's x axis in the ground plane, against d′
-        xmat = d.xmat[c.root_body_id]
-        fx, fy = xmat[0], xmat[3]
-        norm = math.hypot(fx, fy) or 1.0
+        fx, fy = self._facing()  # d, against d′
         vx, vy, _ = self._com_vel
         com, direction = wl19_task(
             (vx - self._target_vel[0], vy - self._target_vel[1]),
-            (fx / norm - self._target_dir[0], fy / norm - self._target_dir[1]),
+            (fx - self._target_dir[0], fy - self._target_dir[1]),
             rc.sigma_com_velocity,
             rc.sigma_direction,
             self._scales.direction,
@@ -393,9 +396,7 @@ class ParamEnv(EnvCore):
         parts = [self._task, d.sensordata[self._obs_sensors]]  # joints, end-effectors
         if self._free:  # the heading frame: the root's x axis projected on the ground
             xmat = d.xmat[c.root_body_id]
-            hx, hy = xmat[0], xmat[3]
-            norm = math.hypot(hx, hy) or 1.0
-            hx, hy = hx / norm, hy / norm
+            hx, hy = self._facing()
 
             def heading(x: float, y: float) -> tuple[float, float]:
                 return hx * x + hy * y, hx * y - hy * x

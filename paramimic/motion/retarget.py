@@ -16,7 +16,6 @@ T u(h) + S u(h + k) with u(θ) = (sin θ, -cos θ), thigh T, shin S.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,11 +88,6 @@ class RetargetedGait:
         self.scale = min(leg.scale for leg in legs)
         self.period = motion.period
         self.joints = motion.joints
-
-    @property
-    def identity(self) -> bool:
-        """Every leg scaled alike: the retargeted gait is the reference itself."""
-        return all(math.isclose(leg.scale, self.scale, rel_tol=1e-9) for leg in self.legs)
 
     def pose(self, phi: float | np.ndarray) -> np.ndarray:
         return retarget_pose(self.motion.pose(phi), self.legs, self.scale)
