@@ -545,6 +545,11 @@ class ExperimentConfig(Section):
                 f"env.retarget: only planar characters' legs are retargeted; {self.character!r} "
                 "is not planar"
             )
+        if self.env.heading_error_limit is not None and character.planar:
+            raise ValueError(
+                f"env.heading_error_limit: {self.character!r} is planar and cannot turn away "
+                "from its target; the rule is for 3D characters"
+            )
         if self.env.retarget and self.env.clip is not None:
             raise ValueError(
                 "env.retarget: retargets the character's [WL19] gait (env.clip unset); [L21] "

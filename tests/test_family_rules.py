@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from paramimic.characters import REGISTRY, get_character, registration
+from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.envs.param_env import FUTURE_POSES
 
@@ -170,6 +171,8 @@ def test_a_heading_rule_ends_an_episode_that_turned_away_from_its_target():
         1.4: (False, False, False),
         None: (False, False, False),
     }
+    with pytest.raises(ValueError, match="env.heading_error_limit"):  # refused in a config
+        ExperimentConfig.model_validate({"character": "walker", "env": {"heading_error_limit": 1}})
     walker = make_env("walker", {}, {"heading_error_limit": 0.1})
     walker.reset(seed=0)
     walker._target_dir = (-1.0, 0.0)  # behind it: a planar body cannot turn, so no rule
