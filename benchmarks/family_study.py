@@ -108,6 +108,10 @@ VARIANTS: dict[str, dict] = {
     "biped_base_heading0.8_vel4": FROZEN
     | G99
     | {"env.heading_error_limit": 0.8, "env.reward.w_com_velocity": 4.0},
+    # half the exploration noise: a 3D body balances in roll as well as pitch
+    "biped_base_heading0.8_std0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
+    | G99
+    | {"env.heading_error_limit": 0.8},
     "biped_x0.5": FROZEN | G99,
     "quadruped_x0.5": FROZEN | G99,
 }
@@ -118,6 +122,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_base_heading0.5": ("configs/biped_lower.yaml", 0.0),
     "biped_base_heading0.8": ("configs/biped_lower.yaml", 0.0),
     "biped_base_heading0.8_vel4": ("configs/biped_lower.yaml", 0.0),
+    "biped_base_heading0.8_std0.1": ("configs/biped_lower.yaml", 0.0),
     "biped_x0.5": ("configs/biped_lower.yaml", 0.5),
     "quadruped_x0.5": ("configs/quadruped.yaml", 0.5),
 }
