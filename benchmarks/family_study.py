@@ -44,6 +44,7 @@ CONFIG = "configs/walker_legs.yaml"
 # does not name env.retarget runs without it (`variant_config`), as it was measured.
 LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
+STD01 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
 G95 = {"ppo.gamma": 0.95}  # [WL19] Table 2
 G99 = {"ppo.gamma": 0.99}
 TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128}
@@ -62,7 +63,7 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_k0": FROZEN | G95 | K0,
     "std_frozen_kl_adaptive": FROZEN | G95 | {"ppo.desired_kl": 0.01},
     "std_frozen_table2": FROZEN | G95 | TABLE2,
-    "std_0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)} | G95,
+    "std_0.1": STD01 | G95,
     "std_frozen_batch16k": FROZEN | G95 | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},
     # the base body alone (legs fixed at 1.0, the family's env layout): the warm start's source
     "base_legs": FROZEN
@@ -109,13 +110,13 @@ VARIANTS: dict[str, dict] = {
     | G99
     | {"env.heading_error_limit": 0.8, "env.reward.w_com_velocity": 4.0},
     # half the exploration noise: a 3D body balances in roll as well as pitch
-    "biped_base_heading0.8_std0.1": {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
-    | G99
-    | {"env.heading_error_limit": 0.8},
+    "biped_base_heading0.8_std0.1": STD01 | G99 | {"env.heading_error_limit": 0.8},
     "biped_x0.5": FROZEN | G99,
+    "biped_x0.5_std0.1": STD01 | G99 | {"env.heading_error_limit": 0.8},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s); the walker's stall rule makes it move
     "quadruped_x0.5_stall": FROZEN | G99 | STALL,
+    "quadruped_x0.5_std0.1_stall": STD01 | G99 | STALL,
 }
 # variants on another config: (config, shape scale s: every shape range shrunk toward the base
 # body, lo' = 1 - s(1 - lo), hi' = 1 + s(hi - 1); s = 0 is the base body alone)
@@ -128,6 +129,8 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5": ("configs/biped_lower.yaml", 0.5),
     "quadruped_x0.5": ("configs/quadruped.yaml", 0.5),
     "quadruped_x0.5_stall": ("configs/quadruped.yaml", 0.5),
+    "quadruped_x0.5_std0.1_stall": ("configs/quadruped.yaml", 0.5),
+    "biped_x0.5_std0.1": ("configs/biped_lower.yaml", 0.5),
 }
 
 
