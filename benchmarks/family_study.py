@@ -331,11 +331,7 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
         worst = 0.0
         while True:
             obs, _, terminated, truncated, info = env.step(act(obs[None])[0])
-            xmat = env.data.xmat[env.character.root_body_id]
-            facing = math.atan2(xmat[3], xmat[0])
-            target = math.atan2(env._target_dir[1], env._target_dir[0])
-            error = abs((facing - target + math.pi) % (2 * math.pi) - math.pi)
-            worst = max(worst, error)
+            worst = max(worst, env.unwrapped.heading_error() or 0.0)
             if terminated or truncated:
                 break
         rows.append(

@@ -164,6 +164,7 @@ def test_a_heading_rule_ends_an_episode_that_turned_away_from_its_target():
         xmat = env.data.xmat[env.character.root_body_id]
         facing = math.atan2(xmat[3], xmat[0])
         env.set_goal("target_direction", facing + 1.2)
+        assert env.heading_error() == pytest.approx(1.2, abs=1e-9)
         _, _, terminated, _, info = env.step(np.zeros(env.action_space.shape))
         ends[limit] = (terminated, info["off_course"], info["fell"])
     assert ends == {
@@ -176,4 +177,5 @@ def test_a_heading_rule_ends_an_episode_that_turned_away_from_its_target():
     walker = make_env("walker", {}, {"heading_error_limit": 0.1})
     walker.reset(seed=0)
     walker._target_dir = (-1.0, 0.0)  # behind it: a planar body cannot turn, so no rule
+    assert walker.heading_error() is None
     assert not walker.step(np.zeros(walker.action_space.shape))[4]["off_course"]

@@ -294,16 +294,24 @@ class ParamEnv(EnvCore):
         return vx * dx + vy * dy < ratio * speed
 
     def _off_course(self) -> bool:
-        """`heading_error_limit`: a free body's facing direction (the root's x axis in the
-        ground plane) is farther than that angle from the target direction."""
+        """`heading_error_limit`: a free body faces farther than that from its target."""
         limit = self.config.heading_error_limit
-        if limit is None or not self._free:
+        if limit is None:
             return False
+        error = self.heading_error()
+        return error is not None and error > limit
+
+    def heading_error(self) -> float | None:
+        """The angle (rad, 0-π) between a free body's facing direction (the root's x axis in the
+        ground plane) and its target direction; None for a planar body or one facing straight
+        up or down."""
+        if not self._free:
+            return None
         fx, fy = self._facing()
-        if fx == fy == 0.0:  # facing straight up or down: no heading
-            return False
+        if fx == fy == 0.0:
+            return None
         dx, dy = self._target_dir
-        return fx * dx + fy * dy < math.cos(limit)
+        return math.acos(max(-1.0, min(1.0, fx * dx + fy * dy)))
 
     def _facing(self) -> tuple[float, float]:
         """The facing direction d: the root's x axis in the ground plane, of unit length ((0, 0)
