@@ -265,19 +265,40 @@ def merge() -> dict:
     return table
 
 
-# the recipes whose training curves study_curves.png draws: the study's main steps
-CURVES = (
-    "learned_std",
-    "std_frozen",
-    "std_frozen_gamma99",
-    "std_frozen_gamma99_stall_widen",
-    "retarget",
-    "retarget_stall",
-    "retarget_stall_k0",
-)
+# the training curves the study draws, per figure: its main steps on walker_legs, and the 3D rows
+CURVES = {
+    "study_curves.png": (
+        "walker_legs (each leg 0.7-1.3x): training curves per variant and seed",
+        (
+            "learned_std",
+            "std_frozen",
+            "std_frozen_gamma99",
+            "std_frozen_gamma99_stall_widen",
+            "retarget",
+            "retarget_stall",
+            "retarget_stall_k0",
+        ),
+    ),
+    "study_curves_3d.png": (
+        "biped_lower (base body, x0.5 ranges) and quadruped (x0.5): training curves per seed",
+        (
+            "biped_base_heading0.8",
+            "biped_base_heading0.8_std0.1",
+            "biped_x0.5_std0.1",
+            "quadruped_x0.5",
+            "quadruped_x0.5_std0.1_heading",
+            "quadruped_x0.5_std0.1_heading_stall",
+        ),
+    ),
+}
 
 
 def _plot(groups: dict) -> None:
+    for name, (title, variants) in CURVES.items():
+        _plot_curves(groups, variants, title, RESULTS / name)
+
+
+def _plot_curves(groups: dict, variants: tuple[str, ...], title: str, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -285,7 +306,7 @@ def _plot(groups: dict) -> None:
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    variants = [v for v in CURVES if any(v == g for g, _ in groups)]
+    variants = [v for v in variants if any(v == g for g, _ in groups)]
     for i, variant in enumerate(variants):
         runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
         for j, r in enumerate(runs):
@@ -296,15 +317,16 @@ def _plot(groups: dict) -> None:
                     y = np.convolve(y, np.ones(10) / 10, mode="valid")
                 ax.plot(x[len(x) - len(y) :], y, color=colors[i % len(colors)], alpha=0.8,
                         label=variant if j == 0 else None)  # fmt: skip
-    for ax, title in zip(
+    for ax, panel in zip(
         axes, ("training falls (%)", "training return", "policy std"), strict=True
     ):
-        ax.set_title(title)
+        ax.set_title(panel)
         ax.set_xlabel("env steps (M)")
     axes[0].legend(fontsize=7)
-    fig.suptitle("walker_legs (each leg 0.7-1.3x): training curves per variant and seed")
+    fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(RESULTS / "study_curves.png", dpi=90)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def headings(variant: str, seed: int, episodes: int = 20) -> dict:
