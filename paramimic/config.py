@@ -179,9 +179,10 @@ class EnvConfig(Section):
     imitation: bool = Field(True, description="follow the character's procedural reference motion")
     retarget: bool = Field(
         False,
-        description="planar characters: each leg follows the base leg's hip-to-ankle path "
-        "scaled by the body's shortest leg (paramimic/motion/retarget.py), so that bodies with "
-        "legs of unequal length get a reference they can follow",
+        description="characters with legs: each leg follows the base leg's hip-to-ankle path "
+        "(in the sagittal plane) scaled by the body's shortest leg "
+        "(paramimic/motion/retarget.py), so that bodies with legs of unequal length get a "
+        "reference they can follow",
     )
     target_velocity: float = Field(1.0, description="target speed when the task space has none")
     target_direction: float = Field(
@@ -540,10 +541,9 @@ class ExperimentConfig(Section):
             )
         registration = _registry().registration(self.character)
         character = registration.character
-        if self.env.retarget and not (character.planar and character.legs):
+        if self.env.retarget and not getattr(character, "legs", ()):
             raise ValueError(
-                f"env.retarget: only planar characters' legs are retargeted; {self.character!r} "
-                "is not planar"
+                f"env.retarget: retargets a character's legs; {self.character!r} has none"
             )
         if self.env.heading_error_limit is not None and character.planar:
             raise ValueError(

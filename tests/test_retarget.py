@@ -6,10 +6,17 @@ import numpy as np
 import pytest
 
 from paramimic.characters import get_character
+from paramimic.characters.articulated import BIPED_LOWER_GAIT, QUADRUPED_GAIT
 from paramimic.characters.planar import WALKER_GAIT
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
-from paramimic.motion.retarget import RetargetedGait, ankle_position, leg_ik, planar_legs
+from paramimic.motion.retarget import (
+    RetargetedGait,
+    ankle_position,
+    leg_chains,
+    leg_ik,
+    retarget_pose,
+)
 
 PHASES = np.linspace(0.0, 1.0, 13)
 
@@ -32,7 +39,7 @@ def _ankles(body, pose: np.ndarray) -> np.ndarray:
 def _gait(shape: dict[str, float]):
     walker = get_character("walker")
     base, body = walker.compile({}), walker.compile(shape)
-    legs = planar_legs(walker, body.segment_lengths, base.segment_lengths)
+    legs = leg_chains(walker, body.segment_lengths, base.segment_lengths)
     return base, body, RetargetedGait(WALKER_GAIT, legs)
 
 
@@ -85,7 +92,7 @@ def test_ik_inverts_fk_and_reaches_for_points_out_of_reach():
     assert k[0] == 0.0 and h[0] == pytest.approx(np.arctan2(0.3, 2.0))
 
 
-def test_the_env_imitates_the_retargeted_gait_and_refuses_3d_characters():
+def test_the_env_imitates_the_retargeted_gait_and_refuses_characters_without_legs():
     task = {"left_leg_length": (0.8, 0.8), "right_leg_length": (1.2, 1.2)}
     cfg = ExperimentConfig.model_validate(
         {"character": "walker", "task": task, "env": {"retarget": True}}
@@ -108,8 +115,9 @@ def test_the_env_imitates_the_retargeted_gait_and_refuses_3d_characters():
         return float(np.mean(bells))
 
     assert pose_bell(env) > 2.0 * pose_bell(plain)
-    with pytest.raises(ValueError, match="env.retarget"):
-        ExperimentConfig.model_validate({"character": "biped_lower", "env": {"retarget": True}})
+    for character in ("fish", "humanoid"):  # no legs to retarget
+        with pytest.raises(ValueError, match="env.retarget"):
+            ExperimentConfig.model_validate({"character": character, "env": {"retarget": True}})
 
 
 def test_retarget_is_refused_for_a_skill_clip():
@@ -133,3 +141,98 @@ def test_a_shape_change_on_the_fly_retargets_the_reference():
     _, _, gait = _gait({"left_leg_length": 1.25, "right_leg_length": 0.75})
     np.testing.assert_allclose(env._reference_at(phase)[:6], gait.pose(phase), atol=2e-3)
     assert not np.allclose(gait.pose(phase), WALKER_GAIT.pose(phase), atol=1e-2)
+
+
+# 3D characters: their legs' hip pitch, knee and ankle pitch hinges, the rest as the reference
+LEGGED = {
+    "biped_lower": (BIPED_LOWER_GAIT, {"thigh_l_z": 1.2, "shin_r_z": 0.8, "global_z": 1.1}),
+    "quadruped": (QUADRUPED_GAIT, {"thigh_fr_z": 0.7, "shin_hl_z": 1.2, "thigh_hr_z": 1.1}),
+}
+
+
+def _ankles_3d(body, definition, pose: np.ndarray) -> np.ndarray:
+    """Each leg's ankle (foot origin) relative to its hip (thigh origin) in the root's frame,
+    (x, z), by MuJoCo's forward kinematics: [legs, 2]."""
+    m = body.model
+    d = mujoco.MjData(m)
+    d.qpos[body.qpos_idx] = pose
+    mujoco.mj_kinematics(m, d)
+    rot = d.xmat[body.root_body_id].reshape(3, 3)
+    rel = np.array(
+        [(d.xpos[m.body(foot).id] - d.xpos[m.body(thigh).id]) @ rot for thigh, _, foot in
+         definition.legs]
+    )  # fmt: skip
+    return rel[:, [0, 2]]
+
+
+@pytest.mark.parametrize("character", sorted(LEGGED))
+def test_every_ankle_of_a_3d_body_follows_the_base_path_scaled_by_the_shortest_leg(character):
+    """In the sagittal plane (the hips' roll and yaw at 0), each ankle of a 3D body with legs
+    of unequal length follows the base body's path scaled by its shortest leg; every other
+    joint keeps the reference's angle."""
+    reference, shape = LEGGED[character]
+    definition = get_character(character)
+    base, body = definition.compile({}), definition.compile(shape)
+    legs = leg_chains(definition, body.segment_lengths, base.segment_lengths)
+    gait = RetargetedGait(reference, legs)
+    lengths = [leg.thigh + leg.shin for leg in legs]
+    base_lengths = [leg.base_thigh + leg.base_shin for leg in legs]
+    assert gait.scale == pytest.approx(
+        min(a / b for a, b in zip(lengths, base_lengths, strict=True))
+    )
+    assert gait.scale < 1.0 and max(leg.scale for leg in legs) > gait.scale  # unequal legs
+    sagittal = sorted(i for leg in legs for i in (leg.hip, leg.knee, leg.ankle))
+    for phi in PHASES:
+        q0 = np.zeros_like(reference.pose(phi))
+        q0[sagittal] = reference.pose(phi)[sagittal]
+        q1 = retarget_pose(q0, legs, gait.scale)
+        want, got = _ankles_3d(base, definition, q0), _ankles_3d(body, definition, q1)
+        np.testing.assert_allclose(got, gait.scale * want, atol=1e-9)
+        for leg in legs:  # the foot keeps its angle to the root
+            assert q1[[leg.hip, leg.knee, leg.ankle]].sum() == pytest.approx(
+                q0[[leg.hip, leg.knee, leg.ankle]].sum(), abs=1e-12
+            )
+        # the whole gait: the hips' roll and yaw, the ankles' roll, the torso as the reference
+        full, ref = gait.pose(phi), reference.pose(phi)
+        others = np.setdiff1d(np.arange(len(ref)), sagittal)
+        np.testing.assert_array_equal(full[others], ref[others])
+        assert not np.allclose(full[sagittal], ref[sagittal], atol=1e-3)
+
+
+def test_a_3d_env_imitates_its_retargeted_gait():
+    """env.retarget on biped_lower: the reference the env tabulates is the body's retargeted
+    gait. With both legs scaled alike (global_z) it is the reference itself where the reference
+    bends the knees the way they are built to; where it overextends one (the biped's knee
+    target reaches +0.1 rad, beyond the joint's range), the knee bends as far the other way and
+    the ankle stays where the reference puts it."""
+    reference, shape = LEGGED["biped_lower"]
+    definition = get_character("biped_lower")
+    base, body = definition.compile({}), definition.compile(shape)
+    legs = leg_chains(definition, body.segment_lengths, base.segment_lengths)
+    gait = RetargetedGait(reference, legs)
+    cfg = ExperimentConfig.model_validate(
+        {"character": "biped_lower", "task": {k: (v, v) for k, v in shape.items()},
+         "env": {"retarget": True}}
+    )  # fmt: skip
+    env = make_env(cfg.character, cfg.task, cfg.env)
+    env.reset(seed=0)
+    joints = len(reference.pose(0.0))
+    for phi in (0.1, 0.55):
+        np.testing.assert_allclose(env._reference_at(phi)[:joints], gait.pose(phi), atol=2e-3)
+    alike = make_env("biped_lower", {"global_z": (1.2, 1.2)}, {"retarget": True})
+    alike.reset(seed=0)
+    knees = [leg.knee for leg in legs]
+    bent = overextended = 0
+    for phi in np.linspace(0.0, 1.0, 41):
+        ref, got = reference.pose(phi), alike._reference_at(phi)[:joints]
+        if np.all(np.abs(ref[knees]) > 0.03):  # away from the knee's turn at 0 (interpolation)
+            want = ref.copy()
+            for leg in legs:
+                h, k, a = ref[[leg.hip, leg.knee, leg.ankle]]
+                if k > 0.0:  # mirrored (thigh = shin): the same ankle and foot angle h + k + a
+                    overextended += 1
+                    want[[leg.hip, leg.knee, leg.ankle]] = h + k, -k, a + k
+                else:
+                    bent += 1
+            np.testing.assert_allclose(got, want, atol=2e-3)
+    assert bent > 0 and overextended > 0

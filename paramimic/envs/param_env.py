@@ -33,7 +33,7 @@ from paramimic.envs.rewards import (
     wl19_task_share,
     wl19_weights,
 )
-from paramimic.motion.retarget import RetargetedGait, planar_legs
+from paramimic.motion.retarget import RetargetedGait, leg_chains
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
@@ -107,7 +107,7 @@ class ParamEnv(EnvCore):
             else RewardScales.identity()
         )
         if self.motion is not None and self.config.retarget:
-            legs = planar_legs(self.definition, body.segment_lengths, base.segment_lengths)
+            legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
             self.motion = RetargetedGait(self._gait, legs)
         self._reference = self._tabulate_reference() if self.motion is not None else None
 

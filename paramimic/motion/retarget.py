@@ -1,4 +1,4 @@
-"""A planar gait retargeted to a body whose legs differ from the base body's.
+"""A gait retargeted to a body whose legs differ from the base body's.
 
 A symmetric reference gait asks every body for the same joint angles. On a body whose left and
 right legs differ, those angles put the two feet at different heights under the hip: following
@@ -7,11 +7,16 @@ controller can both imitate and walk (the pose bell of the walker 0.8/1.2 is 0.0
 reference's own PD targets, against 0.39 for the base body). Retargeted, every leg follows the
 base leg's hip-to-ankle path scaled by the body's *shortest* leg (the scale every leg can reach):
 a long leg bends its knee more, and each foot keeps its angle to the torso (hip + knee +
-ankle). On a body whose legs are all scaled alike the retargeted gait is the reference itself.
+ankle). On a body whose legs are all scaled alike the retargeted gait is the reference itself,
+except where the reference overextends a knee beyond the side it bends to (the biped's knee
+target reaches +0.1 rad against a range of -2.4-0): there the knee bends as far the other way
+and the hip puts the ankle where the reference does.
 
-Legs are planar hinge chains hip - knee - ankle whose angles add up (a leg hanging straight at
-0, the knee bending one way only); the ankle position relative to the hip is
-T u(h) + S u(h + k) with u(θ) = (sin θ, -cos θ), thigh T, shin S.
+Legs are hinge chains hip - knee - ankle in the sagittal plane whose angles add up (a leg
+hanging straight at 0, the knee bending one way only); the ankle position relative to the hip
+is T u(h) + S u(h + k) with u(θ) = (sin θ, -cos θ), thigh T, shin S. A planar character's legs
+are such chains; a 3D character's are its hip pitch, knee and ankle pitch hinges (its hip roll
+and yaw, and the ankle's roll, keep the reference's angles).
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from paramimic.characters.body import PLANAR_AXIS
 
 PHASE_STEP = 1e-4  # of a cycle: the central difference of the retargeted joint velocities
 
@@ -35,6 +42,7 @@ class PlanarLeg:
     shin: float
     base_thigh: float
     base_shin: float
+    knee_sign: float = -1.0  # the side the knee bends to (its joint range's sign)
 
     @property
     def scale(self) -> float:
@@ -71,8 +79,8 @@ def retarget_pose(pose: np.ndarray, legs: tuple[PlanarLeg, ...], scale: float) -
     for leg in legs:
         h, k, a = q[:, leg.hip], q[:, leg.knee], q[:, leg.ankle]
         x, z = ankle_position(h, k, leg.base_thigh, leg.base_shin)
-        sign = np.where(k > 0.0, 1.0, -1.0)  # the knee keeps the side it bends to
-        h2, k2 = leg_ik(scale * x, scale * z, leg.thigh, leg.shin, sign)
+        # the knee bends to the side it is built to, also where the reference overextends it
+        h2, k2 = leg_ik(scale * x, scale * z, leg.thigh, leg.shin, leg.knee_sign)
         q[:, leg.ankle] = h + k + a - h2 - k2
         q[:, leg.hip], q[:, leg.knee] = h2, k2
     return out
@@ -98,26 +106,38 @@ class RetargetedGait:
         return (ahead - behind) / (2.0 * PHASE_STEP * self.period)
 
 
-def planar_legs(
+def leg_chains(
     definition, lengths: dict[str, float], base: dict[str, float]
 ) -> tuple[PlanarLeg, ...]:
-    """The legs of a planar character (`definition.legs`: (thigh, shin) segment names; the foot
-    is the segment whose parent is the shin) as `PlanarLeg`s with the body's segment `lengths`
-    and the base body's `base`."""
+    """The legs of a character as `PlanarLeg`s with the body's segment `lengths` (joint to
+    joint) and the base body's `base`: a planar character's (thigh, shin) segments, the foot
+    being the segment whose parent is the shin; a 3D character's (thigh, shin, foot) parts,
+    their hinges about the pitch axis. Raises ValueError for a character without legs."""
     joints = [j.name for j in definition.joints]
-    segments = {s.name: s for s in definition.segments}
-    legs = []
-    for thigh, shin in definition.legs:
-        foot = next(s for s in definition.segments if s.parent == shin)
-        legs.append(
-            PlanarLeg(
-                hip=joints.index(segments[thigh].joint.name),
-                knee=joints.index(segments[shin].joint.name),
-                ankle=joints.index(foot.joint.name),
-                thigh=lengths[thigh],
-                shin=lengths[shin],
-                base_thigh=base[thigh],
-                base_shin=base[shin],
-            )
+    chains = []  # (thigh, shin, (hip, knee, ankle) hinges)
+    if getattr(definition, "planar", False):
+        segments = {s.name: s for s in definition.segments}
+        for thigh, shin in definition.legs:
+            foot = next(s for s in definition.segments if s.parent == shin)
+            chains.append((thigh, shin, (segments[thigh].joint, segments[shin].joint, foot.joint)))
+    elif getattr(definition, "legs", ()):
+        parts = {p.name: p for p in definition.parts}
+
+        def pitch(part: str):
+            return next(j for j in parts[part].joints if j.axis == PLANAR_AXIS)
+
+        for thigh, shin, foot in definition.legs:
+            chains.append((thigh, shin, (pitch(thigh), pitch(shin), pitch(foot))))
+    if not chains:
+        raise ValueError(f"{definition.name!r} has no legs to retarget")
+    return tuple(
+        PlanarLeg(
+            *(joints.index(j.name) for j in hinges),
+            thigh=lengths[thigh],
+            shin=lengths[shin],
+            base_thigh=base[thigh],
+            base_shin=base[shin],
+            knee_sign=1.0 if hinges[1].range[0] >= 0.0 else -1.0,
         )
-    return tuple(legs)
+        for thigh, shin, hinges in chains
+    )
