@@ -12,6 +12,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
     python benchmarks/family_study.py reference   # the pose bell of every body on its reference
     python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
+    python benchmarks/family_study.py stopped k0 --seed 0   # a stopped screen's training curve
 
 Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
 the training curve); `merge` writes study.json: per variant and budget, mean and spread over
@@ -238,6 +239,30 @@ def probe(variant: str, seed: int, episodes: int = 100) -> dict:
     return report
 
 
+def stopped(variant: str, seed: int) -> dict:
+    """A run stopped before its budget and not evaluated (a screen that lost): its training
+    curve as it stands, benchmarks/results/study_<variant>_s<seed>_stopped.json, for the
+    record and the curves figure. (`run` continues it and writes the evaluated report.)"""
+    run_dir = RUNS / f"{variant}_s{seed}"
+    curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    keep = ("env_steps", "mean_return", "fall_percent", "mean_length", "std", "approx_kl")
+    tail = curve[-10:]
+    report = {
+        "variant": variant,
+        "overrides": VARIANTS[variant],
+        "config": variant_config(variant, seed)[0],
+        "seed": seed,
+        "env_steps": curve[-1]["env_steps"],
+        "evaluated": False,
+        "last_10_iterations": {
+            k: float(np.mean([m[k] for m in tail])) for k in ("mean_return", "fall_percent")
+        },
+        "curve": [{k: m[k] for k in keep if k in m} for m in curve],
+    }
+    (RESULTS / f"study_{variant}_s{seed}_stopped.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
 def _spread(values: list[float]) -> dict:
     a = np.array(values, dtype=float)
     return {"mean": float(a.mean()), "min": float(a.min()), "max": float(a.max()), "n": len(a)}
@@ -269,7 +294,12 @@ def merge() -> dict:
             ),
         }
     (RESULTS / "study.json").write_text(json.dumps(table, indent=2))
-    _plot(groups)
+    curves = dict(groups)  # the figures also draw the stopped screens' curves
+    for path in sorted(RESULTS.glob("study_*_s*_stopped.json")):
+        r = json.loads(path.read_text())
+        if not any(v == r["variant"] for v, _ in groups):
+            curves.setdefault((r["variant"], 0), []).append(r)
+    _plot(curves)
     for name, row in table.items():
         f, w = row["fall_percent"], row["worst_decile_return"]
         print(
@@ -420,7 +450,9 @@ def reference(resets: int = 10, steps: int = 10) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("command", choices=["run", "queue", "merge", "probe", "reference", "headings"])
+    ap.add_argument(
+        "command", choices=["run", "queue", "merge", "probe", "reference", "headings", "stopped"]
+    )
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seeds", default="0", help="comma-separated, for `queue`")
@@ -447,6 +479,12 @@ def main() -> None:
         print(f"{args.variants} s{args.seed} on {CONFIG}: falls {r['fall_percent']:.1f} %")
         for y, row in zip(r["grid"]["y"], r["grid"]["returns"], strict=True):
             print(f"{y:4.2f}", " ".join(f"{v:5.0f}" for v in row))
+    elif args.command == "stopped":
+        r = stopped(args.variants, args.seed)
+        last = r["last_10_iterations"]
+        print(f"{args.variants} s{args.seed} stopped at {r['env_steps']:,} steps: training "
+              f"return {last['mean_return']:.1f}, falls {last['fall_percent']:.0f} % (last 10 "
+              "iterations)")  # fmt: skip
     elif args.command == "run":
         r = run(args.variants, args.seed, args.steps)
         print(f"{args.variants} s{args.seed}: falls {r['fall_percent']:.1f} %")
