@@ -274,10 +274,11 @@ def merge() -> dict:
         if path.name.startswith("study_probe_"):
             continue
         r = json.loads(path.read_text())
-        groups.setdefault((r["variant"], round(r["env_steps"] / 1e6)), []).append(r)
+        millions = float(path.stem.rsplit("_", 1)[1].removesuffix("M"))  # the run's budget
+        groups.setdefault((r["variant"], millions), []).append(r)
     table = {}
     for (variant, millions), runs in sorted(groups.items()):
-        table[f"{variant}@{millions}M"] = {
+        table[f"{variant}@{millions:g}M"] = {
             "seeds": [r["seed"] for r in runs],
             "config": runs[0]["config"],
             "overrides": VARIANTS.get(variant, runs[0]["overrides"]),
@@ -331,6 +332,8 @@ CURVES = {
             "biped_base_heading0.8",
             "biped_base_heading0.8_std0.1",
             "biped_x0.5_std0.1",
+            "biped_x0.5_std0.1_global",
+            "biped_x0.5_std0.1_retarget",
             "quadruped_x0.5",
             "quadruped_x0.5_std0.1_heading",
             "quadruped_x0.5_std0.1_heading_stall",
