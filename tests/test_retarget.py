@@ -7,13 +7,13 @@ import pytest
 
 from paramimic.characters import get_character
 from paramimic.characters.articulated import BIPED_LOWER_GAIT, QUADRUPED_GAIT
+from paramimic.characters.legs import leg_chains
 from paramimic.characters.planar import WALKER_GAIT
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.motion.retarget import (
     RetargetedGait,
     ankle_position,
-    leg_chains,
     leg_ik,
     retarget_pose,
 )

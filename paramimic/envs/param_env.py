@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import Body
+from paramimic.characters.legs import leg_chains
 from paramimic.envs.core import EnvCore
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.envs.rewards import (
@@ -33,7 +34,7 @@ from paramimic.envs.rewards import (
     wl19_task_share,
     wl19_weights,
 )
-from paramimic.motion.retarget import RetargetedGait, leg_chains
+from paramimic.motion.retarget import RetargetedGait
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)

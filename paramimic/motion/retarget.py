@@ -16,7 +16,8 @@ Legs are hinge chains hip - knee - ankle in the sagittal plane whose angles add 
 hanging straight at 0, the knee bending one way only); the ankle position relative to the hip
 is T u(h) + S u(h + k) with u(θ) = (sin θ, -cos θ), thigh T, shin S. A planar character's legs
 are such chains; a 3D character's are its hip pitch, knee and ankle pitch hinges (its hip roll
-and yaw, and the ankle's roll, keep the reference's angles).
+and yaw, and the ankle's roll, keep the reference's angles). A character's legs as chains:
+`paramimic.characters.legs.leg_chains`.
 """
 
 from __future__ import annotations
@@ -24,8 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from paramimic.characters.body import PLANAR_AXIS
 
 PHASE_STEP = 1e-4  # of a cycle: the central difference of the retargeted joint velocities
 
@@ -104,40 +103,3 @@ class RetargetedGait:
         phi = np.asarray(phi, dtype=float)
         ahead, behind = self.pose(phi + PHASE_STEP), self.pose(phi - PHASE_STEP)
         return (ahead - behind) / (2.0 * PHASE_STEP * self.period)
-
-
-def leg_chains(
-    definition, lengths: dict[str, float], base: dict[str, float]
-) -> tuple[PlanarLeg, ...]:
-    """The legs of a character as `PlanarLeg`s with the body's segment `lengths` (joint to
-    joint) and the base body's `base`: a planar character's (thigh, shin) segments, the foot
-    being the segment whose parent is the shin; a 3D character's (thigh, shin, foot) parts,
-    their hinges about the pitch axis. Raises ValueError for a character without legs."""
-    joints = [j.name for j in definition.joints]
-    chains = []  # (thigh, shin, (hip, knee, ankle) hinges)
-    if getattr(definition, "planar", False):
-        segments = {s.name: s for s in definition.segments}
-        for thigh, shin in definition.legs:
-            foot = next(s for s in definition.segments if s.parent == shin)
-            chains.append((thigh, shin, (segments[thigh].joint, segments[shin].joint, foot.joint)))
-    elif getattr(definition, "legs", ()):
-        parts = {p.name: p for p in definition.parts}
-
-        def pitch(part: str):
-            return next(j for j in parts[part].joints if j.axis == PLANAR_AXIS)
-
-        for thigh, shin, foot in definition.legs:
-            chains.append((thigh, shin, (pitch(thigh), pitch(shin), pitch(foot))))
-    if not chains:
-        raise ValueError(f"{definition.name!r} has no legs to retarget")
-    return tuple(
-        PlanarLeg(
-            *(joints.index(j.name) for j in hinges),
-            thigh=lengths[thigh],
-            shin=lengths[shin],
-            base_thigh=base[thigh],
-            base_shin=base[shin],
-            knee_sign=1.0 if hinges[1].range[0] >= 0.0 else -1.0,
-        )
-        for thigh, shin, hinges in chains
-    )
