@@ -10,6 +10,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py queue std_frozen,kl_adaptive --seeds 0 --steps 2000000
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
+    python benchmarks/family_study.py fragility biped_base_heading0.8_std0.1  # base -> family
     python benchmarks/family_study.py reference   # the pose bell of every body on its reference
     python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
     python benchmarks/family_study.py stopped k0 --seed 0   # a stopped screen's training curve
@@ -55,6 +56,12 @@ PRODUCT = {"env.reward.combine": "product"}
 RETARGET = {"env.retarget": True}
 STALL = {"env.stall_speed_ratio": 0.5}
 HEADING = {"env.heading_error_limit": 0.8}
+# the walker study's widening ranges were promoted on falls alone (WidenConfig.promote_on)
+WIDEN_FALLS = {"curriculum.widen": {"promote_on": "falls"}}
+BIPED_BASE_RUN = "runs/study/biped_base_heading0.8_std0.1_s{seed}"  # the base biped, 2M steps
+# a range grown from the base body in steps of 5 % of each range (the base controller, warm
+# started, falls on 57 % of bodies whose height alone varies by +-2.5 %: `fragility`)
+SLOW_WIDEN = {"curriculum.widen": {"start": 0.05, "step": 0.05, "promote_on": "falls"}}
 VARIANTS: dict[str, dict] = {
     # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
     "learned_std": LEARNED | G95,
@@ -74,23 +81,22 @@ VARIANTS: dict[str, dict] = {
     # the family from the base body's controller (run base_legs with the same seed first)
     "warm_std_frozen": FROZEN | G95 | {"train.init_from": BASE_LEGS},
     # the range grows from the base body as it is mastered (curriculum.widen), k = 10 inside it
-    "widen_std_frozen": FROZEN | G95 | {"curriculum.widen": {}},
-    "warm_widen_std_frozen": FROZEN | G95 | {"curriculum.widen": {}, "train.init_from": BASE_LEGS},
+    "widen_std_frozen": FROZEN | G95 | WIDEN_FALLS,
+    "warm_widen_std_frozen": FROZEN | G95 | WIDEN_FALLS | {"train.init_from": BASE_LEGS},
     # the best recipe without retargeting and its uniform-sampling twin
     "std_frozen_gamma99": FROZEN | G99,
     "std_frozen_gamma99_k0": FROZEN | G99 | K0,
-    "std_frozen_gamma99_widen": FROZEN | G99 | {"curriculum.widen": {}},
+    "std_frozen_gamma99_widen": FROZEN | G99 | WIDEN_FALLS,
     # every surviving recipe stands more than it walks (0.2 m/s): the COM-velocity term
     # (w4, 1 of the walker's 14) weighed 4x, alone and with the widening range
     "std_frozen_gamma99_vel4": FROZEN | G99 | {"env.reward.w_com_velocity": 4.0},
     "std_frozen_gamma99_vel4_widen": FROZEN
     | G99
-    | {"env.reward.w_com_velocity": 4.0, "curriculum.widen": {}},
+    | WIDEN_FALLS
+    | {"env.reward.w_com_velocity": 4.0},
     # standing still stops paying: the episode ends below half the target speed (2 s average)
     "std_frozen_gamma99_stall": FROZEN | G99 | {"env.stall_speed_ratio": 0.5},
-    "std_frozen_gamma99_stall_widen": FROZEN
-    | G99
-    | {"env.stall_speed_ratio": 0.5, "curriculum.widen": {}},
+    "std_frozen_gamma99_stall_widen": FROZEN | G99 | WIDEN_FALLS | {"env.stall_speed_ratio": 0.5},
     # the bells multiplied, not added (env.reward.combine): standing still stops paying half
     # of a walking step (the sum's end-effector, direction and torque bells)
     "product": FROZEN | G99 | PRODUCT,
@@ -119,6 +125,18 @@ VARIANTS: dict[str, dict] = {
     "biped_x0.5_std0.1_global": STD01 | G99 | HEADING,
     # symmetric bodies learn faster (global: 34 at 0.6M against 20): the legs retargeted
     "biped_x0.5_std0.1_retarget": STD01 | G99 | HEADING | RETARGET,
+    # the family grown from the base body: from scratch, and warm started from the base biped
+    # (from scratch, promoted on falls, the range grew to the whole family within 180k steps:
+    # the episodes ended by the heading rule, not by a fall; so promoted on every early end)
+    "biped_x0.5_std0.1_widen": STD01
+    | G99
+    | HEADING
+    | {"curriculum.widen": SLOW_WIDEN["curriculum.widen"] | {"promote_on": "early_ends"}},
+    "biped_x0.5_std0.1_warm_widen": STD01
+    | G99
+    | HEADING
+    | SLOW_WIDEN
+    | {"train.init_from": BIPED_BASE_RUN},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -146,6 +164,8 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5_std0.1_global": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_retarget": ("configs/biped_lower.yaml", 0.5),
     "quadruped_x0.5_retarget": ("configs/quadruped.yaml", 0.5),
+    "biped_x0.5_std0.1_widen": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.5_std0.1_warm_widen": ("configs/biped_lower.yaml", 0.5),
 }
 
 
@@ -214,28 +234,90 @@ def run(variant: str, seed: int, steps: int) -> dict:
     return report
 
 
-def probe(variant: str, seed: int, episodes: int = 100) -> dict:
-    """A study run's controller (its latest checkpoint) on the whole family of CONFIG: e.g. how
-    far the base body's controller (`base_legs`) carries, blind to the shape as a warm start
-    begins. Writes study_probe_<variant>_s<seed>.json."""
-    warnings.filterwarnings("ignore")
+def _adopted(variant: str, seed: int, cfg):
+    """A study run's controller (its latest checkpoint) warm started on `cfg`'s family as
+    `train.init_from` would (adopt_controller: inputs constant in its training start ignored)."""
     import torch
 
-    from paramimic.config import ExperimentConfig, load_config
-    from paramimic.evaluation import evaluate_config
+    from paramimic.config import ExperimentConfig
     from paramimic.rl.ppo import PPOLearner, adopt_controller
     from services.learner import checkpoint
     from services.learner.trainer import reset_observations
 
     state = checkpoint.load(RUNS / f"{variant}_s{seed}")
     source = ExperimentConfig.model_validate(state["config"])
-    cfg = load_config(ROOT / CONFIG, {"env": source.env.model_dump()})
     learner = PPOLearner(state["obs_dim"], state["act_dim"], source.ppo)
-    adopt_controller(learner, state["learner"], reset_observations(cfg))  # as a warm start
+    adopt_controller(learner, state["learner"], reset_observations(cfg))
     torch.set_num_threads(1)
-    report = evaluate_config(learner.policy, cfg, episodes, EVAL_SEED, 7, seconds=10.0)
+    return learner.policy, source
+
+
+def _source_env(variant: str, seed: int) -> dict:
+    from paramimic.config import ExperimentConfig
+    from services.learner import checkpoint
+
+    state = checkpoint.load(RUNS / f"{variant}_s{seed}")
+    return ExperimentConfig.model_validate(state["config"]).env.model_dump()
+
+
+def probe(variant: str, seed: int, episodes: int = 100) -> dict:
+    """A study run's controller (its latest checkpoint) on the whole family of CONFIG: e.g. how
+    far the base body's controller (`base_legs`) carries, blind to the shape as a warm start
+    begins. Writes study_probe_<variant>_s<seed>.json."""
+    warnings.filterwarnings("ignore")
+    from paramimic.config import load_config
+    from paramimic.evaluation import evaluate_config
+
+    cfg = load_config(ROOT / CONFIG, {"env": _source_env(variant, seed)})
+    policy, _ = _adopted(variant, seed, cfg)
+    report = evaluate_config(policy, cfg, episodes, EVAL_SEED, 7, seconds=10.0)
     report |= {"variant": variant, "seed": seed, "family": CONFIG}
     (RESULTS / f"study_probe_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
+# (shape scale, shape parameters that vary: a prefix of their names, "" for all of them)
+FRAGILITY_FAMILIES = (
+    (0.05, ""), (0.25, ""), (0.5, ""),
+    (0.05, "global_"), (0.05, "global_z"), (0.02, "global_z"), (0.05, "hip_"), (0.05, "torso_"),
+    (0.05, "thigh_"), (0.05, "shin_"), (0.05, "foot_"),
+)  # fmt: skip
+
+
+def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
+    """How far a base-body run's controller (warm started as `train.init_from` does) carries
+    into its config's family: falls and return on random bodies of the shape ranges shrunk by
+    s, with all shape parameters varying or only one group. Writes
+    study_fragility_<variant>_s<seed>.json."""
+    warnings.filterwarnings("ignore")
+    from normalization import shrunk_shape_ranges
+
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, run_episodes, summarize
+
+    config = variant_config(variant, seed)[0]
+    env = _source_env(variant, seed)
+    rows = []
+    for scale, prefix in FRAGILITY_FAMILIES:
+        ranges = shrunk_shape_ranges(Path(config).stem, scale)
+        ranges = {k: r if k.startswith(f"task.{prefix}") else [1.0, 1.0] for k, r in ranges.items()}
+        cfg = load_config(ROOT / config, {"env": env} | ranges)
+        policy, _ = _adopted(variant, seed, cfg)
+        env_cfg = cfg.env.for_evaluation(10.0)
+        space = make_env(cfg.character, cfg.task, env_cfg).task_space
+        tasks = space.sample(np.random.default_rng(EVAL_SEED), episodes)
+        results = run_episodes(
+            deterministic(policy), lambda c=cfg, e=env_cfg: make_env(c.character, c.task, e),
+            tasks, 8, EVAL_SEED,
+        )  # fmt: skip
+        summary = summarize(results)
+        rows.append({"shape_scale": scale, "varying": prefix or "all"} | summary)
+        print(f"shape scale {scale:g}, varying {prefix or 'all'}: falls "
+              f"{summary['fall_percent']:.1f} %, return {summary['mean_return']:.0f}")  # fmt: skip
+    report = {"variant": variant, "seed": seed, "config": config, "episodes": episodes,
+              "families": rows}  # fmt: skip
+    (RESULTS / f"study_fragility_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
     return report
 
 
@@ -454,7 +536,8 @@ def reference(resets: int = 10, steps: int = 10) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument(
-        "command", choices=["run", "queue", "merge", "probe", "reference", "headings", "stopped"]
+        "command",
+        choices=["run", "queue", "merge", "probe", "fragility", "reference", "headings", "stopped"],
     )
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
@@ -482,6 +565,8 @@ def main() -> None:
         print(f"{args.variants} s{args.seed} on {CONFIG}: falls {r['fall_percent']:.1f} %")
         for y, row in zip(r["grid"]["y"], r["grid"]["returns"], strict=True):
             print(f"{y:4.2f}", " ".join(f"{v:5.0f}" for v in row))
+    elif args.command == "fragility":
+        fragility(args.variants, args.seed)
     elif args.command == "stopped":
         r = stopped(args.variants, args.seed)
         last = r["last_10_iterations"]

@@ -342,13 +342,22 @@ class WidenConfig(Section):
     it: automatic domain randomization's rule (OpenAI 2019) on one width for all free dims. Tasks
     drawn from S are pulled toward the centre to `width` of their offset (V̄ sampling runs
     inside the current range); after every `window` training episodes the width grows by `step`
-    if fewer than `promote_below` of them fell."""
+    if fewer than `promote_below` of them failed: ended early for any reason the env has (a
+    fall, a stall, off course, a divergence), or with `promote_on: falls` only by a fall, the
+    rule of the walker study's recorded runs (an episode ended by the stall or heading rule
+    counts as mastered there: a controller that turns away at once grows the range)."""
 
     start: float = Field(0.2, ge=0, le=1, description="initial width, a share of each range")
     step: float = Field(0.1, gt=0, le=1, description="width added on a promotion")
     window: int = Field(256, ge=1, description="training episodes per promotion decision")
     promote_below: float = Field(
-        0.5, gt=0, le=1, description="grow when fewer than this share of the window's episodes fell"
+        0.5,
+        gt=0,
+        le=1,
+        description="grow when fewer than this share of the window's episodes failed",
+    )
+    promote_on: Literal["early_ends", "falls"] = Field(
+        "early_ends", description="what fails an episode: any early end, or only a fall"
     )
 
 

@@ -75,8 +75,20 @@ def _widening(**widen) -> AdaptiveCurriculum:
     return AdaptiveCurriculum.from_config(cfg)
 
 
-def _episodes(n: int, falls: int) -> list[dict]:
-    return [{"length": 10, "fell": i < falls, "diverged": False, "return": 1.0} for i in range(n)]
+def _episodes(n: int, falls: int, early_ends: int | None = None) -> list[dict]:
+    """n episodes, the first `falls` fell, the first `early_ends` (default: the falls) ended
+    early (a fall or another early end: stalled, off course)."""
+    early = falls if early_ends is None else early_ends
+    return [
+        {
+            "length": 10,
+            "fell": i < falls,
+            "ended_early": i < early,
+            "diverged": False,
+            "return": 1.0,
+        }
+        for i in range(n)
+    ]
 
 
 def test_a_widening_range_starts_at_the_centre_and_grows_when_mastered():
@@ -95,6 +107,17 @@ def test_a_widening_range_starts_at_the_centre_and_grows_when_mastered():
     assert c.width == pytest.approx(0.5)
     c.ingest(_episodes(1, falls=0) + _episodes(20, falls=0))
     assert c.width == 1.0 and c.summary()["range_width"] == 1.0  # capped at the whole range
+
+
+def test_a_range_grows_on_episodes_that_last_not_on_those_that_end_early_standing():
+    c = _widening(start=0.2, step=0.3, promote_below=0.5)  # promote_on: early_ends
+    c.ingest(_episodes(10, falls=1, early_ends=8))  # 1 fell, 7 more stalled or turned away
+    assert c.width == pytest.approx(0.2)
+    c.ingest(_episodes(10, falls=1, early_ends=4))
+    assert c.width == pytest.approx(0.5)
+    d = _widening(start=0.2, step=0.3, promote_below=0.5, promote_on="falls")
+    d.ingest(_episodes(10, falls=1, early_ends=8))  # the walker study's rule: falls only
+    assert d.width == pytest.approx(0.5)
 
 
 def test_v_bar_sampling_runs_inside_the_current_range_and_the_width_survives_a_restart():

@@ -45,6 +45,9 @@ def test_fragment_shapes_tasks_and_episodes():
     assert len({e.episode_id for e in f.episodes}) == len(f.episodes)
     for e in f.episodes:
         assert e.length <= 15 and e.ret > 0 and set(e.reward_terms) >= {"pose", "task"}
+        assert e.ended_early == (e.fell or e.diverged)  # no stall or heading rule here
+    assert sum(e.ended_early for e in f.episodes) == int(f.terminated.sum())
+    assert 0 < sum(e.ended_early for e in f.episodes) < len(f.episodes)  # both kinds here
     # values and log-probs are the policy's own for the recorded observations and actions
     with torch.no_grad():
         mean, value = policy(torch.from_numpy(f.obs[5]))

@@ -52,7 +52,7 @@ class AdaptiveCurriculum:
         self.marginal_iteration = -1
         self.stats: dict[str, float] = dict.fromkeys(STAT_FIELDS, 0)
         self.width = config.widen.start if config.widen is not None else 1.0
-        self.window = [0, 0]  # episodes and falls since the last widening decision
+        self.window = [0, 0]  # episodes and failures since the last widening decision
         self._stats_of: np.ndarray | None = None  # the buffer whose mean/std are cached
         self._stats: tuple[dict, dict] = ({}, {})
 
@@ -105,16 +105,18 @@ class AdaptiveCurriculum:
             self.stats["falls"] += int(bool(e["fell"]))
             self.stats["diverged"] += int(bool(e["diverged"]))
             self.stats["return_sum"] += float(e["return"])
-            self._widen(bool(e["fell"]))
+            self._widen(e)
         return n
 
-    def _widen(self, fell: bool) -> None:
+    def _widen(self, episode: dict) -> None:
         """Count an episode toward the next widening decision (`WidenConfig`)."""
         rule = self.config.widen
         if rule is None or self.width >= 1.0:
             return
         self.window[0] += 1
-        self.window[1] += int(fell)
+        self.window[1] += int(
+            bool(episode["ended_early" if rule.promote_on == "early_ends" else "fell"])
+        )
         if self.window[0] >= rule.window:
             if self.window[1] < rule.promote_below * self.window[0]:
                 self.width = min(1.0, self.width + rule.step)

@@ -62,6 +62,8 @@ class EpisodeSummary:
     fell: bool
     diverged: bool
     reward_terms: dict[str, float]  # per-term sums over the episode
+    # the env ended it before its time limit (a fall, a stall, off course, a divergence, ...)
+    ended_early: bool
     # [L21] episodes: achieved a', fitness F, trace, and the deal's batch/region/motion version
     skill: dict = field(default_factory=dict)
 
@@ -74,6 +76,7 @@ class EpisodeSummary:
             "fell": self.fell,
             "diverged": self.diverged,
             "reward_terms": self.reward_terms,
+            "ended_early": self.ended_early,
         }
         for k, v in self.skill.items():
             out[k] = v.tolist() if isinstance(v, np.ndarray) else v
@@ -233,7 +236,7 @@ class RolloutWorker:
             if terminated or truncated:
                 if truncated:
                     run.final_obs.append((t, i, obs))  # bootstrapped from V(final obs)
-                run.episodes.append(_summary(ep, info))
+                run.episodes.append(_summary(ep, info, bool(terminated)))
                 ended.append(i)
         next_obs = np.stack([res[0] for res in results])
         if ended:
@@ -301,7 +304,7 @@ class _Buffers:
         self.truncated[t] = truncated
 
 
-def _summary(ep: dict, info: dict) -> EpisodeSummary:
+def _summary(ep: dict, info: dict, terminated: bool) -> EpisodeSummary:
     return EpisodeSummary(
         episode_id=ep["id"],
         task=np.asarray(ep["task"]),
@@ -310,6 +313,7 @@ def _summary(ep: dict, info: dict) -> EpisodeSummary:
         fell=bool(info["fell"]),
         diverged=bool(info["diverged"]),
         reward_terms=ep["terms"],
+        ended_early=terminated,
         skill=_skill_fields(info, ep["tags"]),
     )
 
