@@ -137,6 +137,11 @@ VARIANTS: dict[str, dict] = {
     | HEADING
     | SLOW_WIDEN
     | {"train.init_from": BIPED_BASE_RUN},
+    # its updates move the policy far: clip fractions 0.6-0.74, approx. KL 0.1-0.54 (std 0.1
+    # makes a small step of the mean a large KL): a 4x smaller policy step
+    "biped_x0.5_std0.1_lr5e-5": STD01 | G99 | HEADING | {"ppo.policy_lr": 5e-5},
+    # a family 10x narrower than x0.5 from scratch: is it the breadth or any variation at all
+    "biped_x0.05_std0.1": STD01 | G99 | HEADING,
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -166,6 +171,8 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "quadruped_x0.5_retarget": ("configs/quadruped.yaml", 0.5),
     "biped_x0.5_std0.1_widen": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.5_std0.1_lr5e-5": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.05_std0.1": ("configs/biped_lower.yaml", 0.05),
 }
 
 
