@@ -346,7 +346,15 @@ def stopped(variant: str, seed: int) -> dict:
     record and the curves figure. (`run` continues it and writes the evaluated report.)"""
     run_dir = RUNS / f"{variant}_s{seed}"
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
-    keep = ("env_steps", "mean_return", "fall_percent", "mean_length", "std", "approx_kl")
+    keep = (
+        "env_steps",
+        "mean_return",
+        "fall_percent",
+        "mean_length",
+        "std",
+        "approx_kl",
+        "range_width",
+    )
     tail = curve[-10:]
     report = {
         "variant": variant,
@@ -414,6 +422,8 @@ def merge() -> dict:
 
 
 # the training curves the study draws, per figure: its main steps on walker_legs, and the 3D rows
+STD_PANEL = ("std", "policy std")
+WIDTH_PANEL = ("range_width", "share of the shape ranges in use (curriculum.widen)")
 CURVES = {
     "study_curves.png": (
         "walker_legs (each leg 0.7-1.3x): training curves per variant and seed",
@@ -426,6 +436,7 @@ CURVES = {
             "retarget_stall",
             "retarget_stall_k0",
         ),
+        STD_PANEL,
     ),
     "study_curves_3d.png": (
         "biped_lower (base body, x0.5 ranges) and quadruped (x0.5): training curves per seed",
@@ -433,22 +444,37 @@ CURVES = {
             "biped_base_heading0.8",
             "biped_base_heading0.8_std0.1",
             "biped_x0.5_std0.1",
-            "biped_x0.5_std0.1_global",
-            "biped_x0.5_std0.1_retarget",
             "quadruped_x0.5",
             "quadruped_x0.5_std0.1_heading",
             "quadruped_x0.5_std0.1_heading_stall",
         ),
+        STD_PANEL,
+    ),
+    "study_curves_biped_x0.5.png": (
+        "biped_lower at x0.5 ranges: the recipe and its screens, training curves per seed",
+        (
+            "biped_x0.5_std0.1",
+            "biped_x0.5_std0.1_global",
+            "biped_x0.5_std0.1_retarget",
+            "biped_x0.5_std0.1_lr5e-5",
+            "biped_x0.5_std0.05",
+            "biped_x0.5_std0.1_warm_widen",
+            "biped_x0.5_std0.1_warm_widen0.7",
+        ),
+        WIDTH_PANEL,
     ),
 }
 
 
 def _plot(groups: dict) -> None:
-    for name, (title, variants) in CURVES.items():
-        _plot_curves(groups, variants, title, RESULTS / name)
+    for name, (title, variants, panel) in CURVES.items():
+        _plot_curves(groups, variants, title, panel, RESULTS / name)
 
 
-def _plot_curves(groups: dict, variants: tuple[str, ...], title: str, path: Path) -> None:
+def _plot_curves(
+    groups: dict, variants: tuple[str, ...], title: str, panel: tuple[str, str], path: Path
+) -> None:
+    """Training falls, return and `panel` (a curve key, its title) per variant and seed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -461,16 +487,14 @@ def _plot_curves(groups: dict, variants: tuple[str, ...], title: str, path: Path
         runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
         for j, r in enumerate(runs):
             x = [m["env_steps"] / 1e6 for m in r["curve"]]
-            for ax, key in zip(axes, ("fall_percent", "mean_return", "std"), strict=True):
-                y = np.array([m.get(key, np.nan) for m in r["curve"]])
-                if key != "std" and len(y) >= 10:  # noisy episodes: a moving average of 10
+            for ax, key in zip(axes, ("fall_percent", "mean_return", panel[0]), strict=True):
+                y = np.array([m.get(key, np.nan) for m in r["curve"]], dtype=float)
+                if key != panel[0] and len(y) >= 10:  # noisy episodes: a moving average of 10
                     y = np.convolve(y, np.ones(10) / 10, mode="valid")
                 ax.plot(x[len(x) - len(y) :], y, color=colors[i % len(colors)], alpha=0.8,
                         label=variant if j == 0 else None)  # fmt: skip
-    for ax, panel in zip(
-        axes, ("training falls (%)", "training return", "policy std"), strict=True
-    ):
-        ax.set_title(panel)
+    for ax, label in zip(axes, ("training falls (%)", "training return", panel[1]), strict=True):
+        ax.set_title(label)
         ax.set_xlabel("env steps (M)")
     axes[0].legend(fontsize=7)
     fig.suptitle(title)
