@@ -311,7 +311,7 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     """How far a base-body run's controller (warm started as `train.init_from` does) carries
     into its config's family: falls and return on random bodies of the shape ranges shrunk by
     s, with all shape parameters varying or only one group. Writes
-    study_fragility_<variant>_s<seed>.json."""
+    study_fragility_<variant>_s<seed>_<M>M.json (M: the checkpoint's env steps)."""
     warnings.filterwarnings("ignore")
     from normalization import shrunk_shape_ranges
 
@@ -338,9 +338,11 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
         rows.append({"shape_scale": scale, "varying": prefix or "all"} | summary)
         print(f"shape scale {scale:g}, varying {prefix or 'all'}: falls "
               f"{summary['fall_percent']:.1f} %, return {summary['mean_return']:.0f}")  # fmt: skip
-    report = {"variant": variant, "seed": seed, "config": config, "episodes": episodes,
-              "families": rows}  # fmt: skip
-    (RESULTS / f"study_fragility_{variant}_s{seed}.json").write_text(json.dumps(report, indent=2))
+    steps = int(state["progress"]["env_steps"])
+    report = {"variant": variant, "seed": seed, "config": config, "env_steps": steps,
+              "episodes": episodes, "families": rows}  # fmt: skip
+    name = f"study_fragility_{variant}_s{seed}_{round(steps / 1e6):g}M.json"
+    (RESULTS / name).write_text(json.dumps(report, indent=2))
     return report
 
 
