@@ -156,6 +156,9 @@ VARIANTS: dict[str, dict] = {
     # the base biped's gait is a knife edge in the body's height (`fragility`: 57.5 % falls at
     # +-2.5 %): the recipe on bodies jittered that much (x0.05), from scratch
     "biped_x0.05_std0.1": STD01 | G99 | HEADING,
+    # its training return stayed at 38 by 2M (the base body's: 176): the same bodies, the
+    # policy blind to them (env.observe_shape false: its shape inputs are the base body's)
+    "biped_x0.05_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -188,6 +191,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5_std0.1_lr5e-5": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.05": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.05_std0.1": ("configs/biped_lower.yaml", 0.05),
+    "biped_x0.05_std0.1_blind": ("configs/biped_lower.yaml", 0.05),
     "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
 }
 

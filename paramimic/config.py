@@ -210,6 +210,11 @@ class EnvConfig(Section):
         "stall_speed_ratio; evaluation runs without it)",
     )  # fmt: skip
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
+    observe_shape: bool = Field(
+        True, description="false: the observation's shape parameters stay at the base body's "
+        "(1.0), so the policy does not know the body it controls (domain randomization: a "
+        "study's control for [WL19]'s shape-aware policy)",
+    )  # fmt: skip
     reward: RewardConfig = RewardConfig()
     clip: str | None = Field(
         None, description="imitate this clip in continuous time ([L21]); None: [WL19] gaits"

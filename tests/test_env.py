@@ -124,3 +124,19 @@ def test_same_seed_same_episode():
         return np.array([env.step(np.full(6, 0.1))[0] for _ in range(20)])
 
     np.testing.assert_array_equal(roll(5), roll(5))
+
+
+def test_a_policy_blind_to_the_shape_sees_the_base_body_and_controls_the_real_one():
+    task = {"left_leg_length": (0.7, 1.3), "right_leg_length": (0.7, 1.3)}
+    seen = ParamEnv("walker", task)
+    blind = ParamEnv("walker", task, config={"observe_shape": False})
+    body = {"left_leg_length": 0.8, "right_leg_length": 1.25}
+    o_seen, _ = seen.reset(seed=1, options={"task": body})
+    o_blind, info = blind.reset(seed=1, options={"task": body})
+    np.testing.assert_allclose(o_seen[:2], [0.8, 1.25])
+    np.testing.assert_allclose(o_blind[:2], [1.0, 1.0])  # the base body's parameters
+    np.testing.assert_allclose(info["task"], [0.8, 1.25])  # the body it controls
+    np.testing.assert_allclose(o_blind[2:], o_seen[2:])  # the rest of the state is the same
+    assert blind.character.shape == seen.character.shape != blind._base.shape
+    blind.set_shape({"left_leg_length": 1.2})  # a shape change on the fly stays hidden
+    np.testing.assert_allclose(blind._last_obs[:2], [1.0, 1.0])

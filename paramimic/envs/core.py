@@ -132,6 +132,15 @@ class EnvCore(gym.Env, ABC):
             raise ValueError(f"task {a} is not inside the task space {self.task_space.ranges()}")
         return a
 
+    def observed_task(self) -> np.ndarray:
+        """The task as the policy observes it: with `env.observe_shape` false, the shape
+        parameters at the base body's 1.0 (the policy is blind to the body)."""
+        if self.config.observe_shape or not self._shape_idx:
+            return self._task
+        task = self._task.copy()
+        task[[i for _, i in self._shape_idx]] = 1.0
+        return task
+
     def body_for(self, task: np.ndarray) -> Body:
         """The compiled body of the shape part of `task`."""
         shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)

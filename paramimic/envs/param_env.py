@@ -402,7 +402,7 @@ class ParamEnv(EnvCore):
         the whole scene about the vertical leaves the observation unchanged."""
         c, d = self.character, self.data
         vx, vy, vz = self._com_vel
-        parts = [self._task, d.sensordata[self._obs_sensors]]  # joints, end-effectors
+        parts = [self.observed_task(), d.sensordata[self._obs_sensors]]  # joints, end-effectors
         if self._free:  # the heading frame: the root's x axis projected on the ground
             xmat = d.xmat[c.root_body_id]
             hx, hy = self._facing()

@@ -571,7 +571,7 @@ class SkillEnv(EnvCore):
         qa = self._at(self._qa, nxt)
         return np.concatenate(
             [
-                self._task,
+                self.observed_task(),
                 d.qpos[c.qpos_idx],
                 d.qvel[c.qvel_idx],
                 d.qvel[: self.root_nv],
