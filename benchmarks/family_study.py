@@ -11,6 +11,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
     python benchmarks/family_study.py fragility biped_base_heading0.8_std0.1  # base -> family
+    python benchmarks/family_study.py fit-offsets   # how far Eq. 1 moves a body's first pose
     python benchmarks/family_study.py reference   # the pose bell of every body on its reference
     python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
     python benchmarks/family_study.py stopped k0 --seed 0   # a stopped screen's training curve
@@ -159,6 +160,12 @@ VARIANTS: dict[str, dict] = {
     # its training return stayed at 38 by 2M (the base body's: 176): the same bodies, the
     # policy blind to them (env.observe_shape false: its shape inputs are the base body's)
     "biped_x0.05_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
+    # blind to the shape it learned faster (62 against 38 at 1.23M; the base body: 104): the
+    # x0.5 family blind; and without the [WL19] Eq. 1 ground fit of the initial posture, which
+    # moves an x0.5 body's joints up to 0.5 rad off its reference (0.05 at x0.05), a jerk at
+    # the first step when the servos pull them back
+    "biped_x0.5_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
+    "biped_x0.5_std0.1_nofit": STD01 | G99 | HEADING | {"env.ground_fit": False},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -192,6 +199,8 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5_std0.05": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.05_std0.1": ("configs/biped_lower.yaml", 0.05),
     "biped_x0.05_std0.1_blind": ("configs/biped_lower.yaml", 0.05),
+    "biped_x0.5_std0.1_blind": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.5_std0.1_nofit": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
 }
 
@@ -555,6 +564,35 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
     return report
 
 
+def fit_offsets(resets: int = 10) -> dict:
+    """How far [WL19] Eq. 1's ground fit moves a biped_lower body's initial posture off its
+    reference pose (init_noise 0): per shape scale, the largest joint offset (rad) of each
+    reset. Writes study_fit_offsets.json."""
+    warnings.filterwarnings("ignore")
+    from normalization import shrunk_shape_ranges
+
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+
+    rows = []
+    for scale in (0.0, 0.05, 0.5):
+        overrides = shrunk_shape_ranges("biped_lower", scale) | {"env.init_noise": 0.0}
+        cfg = load_config(ROOT / "configs/biped_lower.yaml", overrides)
+        env = make_env(cfg.character, cfg.task, cfg.env).unwrapped
+        offsets = []
+        for i in range(resets):
+            env.reset(seed=i)
+            c = env.character
+            reference = np.clip(env.motion.pose(env._phase), c.ctrl_low, c.ctrl_high)
+            offsets.append(float(np.abs(reference - env.data.qpos[c.qpos_idx]).max()))
+        rows.append({"shape_scale": scale, "max_joint_offset_rad": offsets})
+        print(f"shape scale {scale:g}: largest joint offset from the reference "
+              f"{max(offsets):.3f} rad (mean over resets {np.mean(offsets):.3f})")  # fmt: skip
+    report = {"config": "configs/biped_lower.yaml", "resets": resets, "scales": rows}
+    (RESULTS / "study_fit_offsets.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
 REFERENCE_BODIES = ((1.0, 1.0), (0.8, 0.8), (1.2, 1.2), (0.8, 1.2), (1.2, 0.8), (0.7, 1.3))
 
 
@@ -590,7 +628,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument(
         "command",
-        choices=["run", "queue", "merge", "probe", "fragility", "reference", "headings", "stopped"],
+        choices=[
+            "run",
+            "queue",
+            "merge",
+            "probe",
+            "fragility",
+            "fit-offsets",
+            "reference",
+            "headings",
+            "stopped",
+        ],  # fmt: skip
     )
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
     ap.add_argument("--seed", type=int, default=0)
@@ -618,6 +666,8 @@ def main() -> None:
         print(f"{args.variants} s{args.seed} on {CONFIG}: falls {r['fall_percent']:.1f} %")
         for y, row in zip(r["grid"]["y"], r["grid"]["returns"], strict=True):
             print(f"{y:4.2f}", " ".join(f"{v:5.0f}" for v in row))
+    elif args.command == "fit-offsets":
+        fit_offsets()
     elif args.command == "fragility":
         fragility(args.variants, args.seed)
     elif args.command == "stopped":
