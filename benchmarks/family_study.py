@@ -477,6 +477,8 @@ CURVES = {
             "biped_x0.5_std0.1_retarget",
             "biped_x0.5_std0.1_lr5e-5",
             "biped_x0.5_std0.05",
+            "biped_x0.5_std0.1_blind",
+            "biped_x0.5_std0.1_nofit",
             "biped_x0.5_std0.1_warm_widen",
             "biped_x0.5_std0.1_warm_widen0.7",
         ),
