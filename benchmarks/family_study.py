@@ -399,8 +399,8 @@ def _spread(values: list[float]) -> dict:
 def merge() -> dict:
     groups: dict[tuple[str, float], list[dict]] = {}
     for path in sorted(RESULTS.glob("study_*_s*_*M.json")):
-        if path.name.startswith("study_probe_"):
-            continue
+        if path.name.startswith(("study_probe_", "study_fragility_")):
+            continue  # evaluations of a run's controller elsewhere, not runs
         r = json.loads(path.read_text())
         millions = float(path.stem.rsplit("_", 1)[1].removesuffix("M"))  # the run's budget
         groups.setdefault((r["variant"], millions), []).append(r)
@@ -505,7 +505,8 @@ def _plot_curves(
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     variants = [v for v in variants if any(v == g for g, _ in groups)]
     for i, variant in enumerate(variants):
-        runs = max((g for (v, _), g in groups.items() if v == variant), key=len)
+        # the budget with the most seeds, the longest of those (its curve holds the shorter's)
+        _, runs = max(((len(g), m), g) for (v, m), g in groups.items() if v == variant)
         for j, r in enumerate(runs):
             x = [m["env_steps"] / 1e6 for m in r["curve"]]
             for ax, key in zip(axes, ("fall_percent", "mean_return", panel[0]), strict=True):
