@@ -345,7 +345,7 @@ def targets() -> list[dict]:
     for character, variant in X05.items():
         # as for walker_legs, a speed keeps the falls honest: a family that stands does not fall
         row = _falls_row(variant, 10, 25.0)
-        row["met"] = row["met"] and min(row["measured"]["forward_speed"]) >= WALKING
+        row["met"] = row["met"] and min(row["measured"]["forward_speed"], default=0) >= WALKING
         rows.append({"target": f"{character} at x0.5 shape ranges: <= 25 % falls within 10M "
                      f"steps, walking (speed >= {WALKING} m/s)"} | row)  # fmt: skip
     rows.append(
