@@ -11,6 +11,7 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
     python benchmarks/family_study.py fragility biped_base_heading0.8_std0.1  # base -> family
+    python benchmarks/family_study.py sensitivity biped_base_heading0.8_std0.1  # one part at a time
     python benchmarks/family_study.py fit-offsets   # how far Eq. 1 moves a body's first pose
     python benchmarks/family_study.py reference   # the pose bell of every body on its reference
     python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
@@ -58,6 +59,7 @@ PRODUCT = {"env.reward.combine": "product"}
 RETARGET = {"env.retarget": True}
 STALL = {"env.stall_speed_ratio": 0.5}
 HEADING = {"env.heading_error_limit": 0.8}
+FLOOR = {"ppo.obs_std_floor": 0.02}
 # the walker study's widening ranges were promoted on falls alone (WidenConfig.promote_on)
 WIDEN_FALLS = {"curriculum.widen": {"promote_on": "falls"}}
 BIPED_BASE_RUN = "runs/study/biped_base_heading0.8_std0.1_s{seed}"  # the base biped, 2M steps
@@ -160,6 +162,12 @@ VARIANTS: dict[str, dict] = {
     # the first step when the servos pull them back
     "biped_x0.5_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
     "biped_x0.5_std0.1_nofit": STD01 | G99 | HEADING | {"env.ground_fit": False},
+    # the base gait hinges on the torso (`sensitivity`: 90-100 % falls with the torso 2 % shorter
+    # or taller): its position in the root frame, held by a stiff ball joint, varied by 0.7 mm
+    # in the base body's training, so the normalizer turned 5 mm into 7 sigma: the normalizer's
+    # std floored at 2 cm / 0.02 rad (ppo.obs_std_floor), on the base body and the x0.5 family
+    "biped_base_heading0.8_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
+    "biped_x0.5_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -198,6 +206,8 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.05_std0.1_blind": ("configs/biped_lower.yaml", 0.05),
     "biped_x0.5_std0.1_blind": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_nofit": ("configs/biped_lower.yaml", 0.5),
+    "biped_base_heading0.8_std0.1_floor": ("configs/biped_lower.yaml", 0.0),
+    "biped_x0.5_std0.1_floor": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
 }
 
@@ -358,6 +368,53 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     return report
 
 
+# one shape parameter moved at a time (the others at the base body's 1.0): which part of the
+# body a controller's gait hinges on
+SENSITIVITY_PARAMETERS = ("global_x", "global_z", "hip_z", "torso_z", "thigh_r_z", "shin_r_z",
+                          "foot_r_z")  # fmt: skip
+SENSITIVITY_VALUES = (0.98, 1.02)
+
+
+def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
+    """A run's controller (as `fragility` adopts it) on bodies that differ from the base body
+    in one shape parameter by 2 %: falls and forward speed per parameter and value, the base
+    body first. Writes study_sensitivity_<variant>_s<seed>_<M>M.json."""
+    warnings.filterwarnings("ignore")
+    from normalization import shrunk_shape_ranges
+
+    from paramimic.config import load_config
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, run_episodes, summarize
+
+    config = variant_config(variant, seed)[0]
+    state, env = _run_state(variant, seed)
+    # ranges wide enough to hold every value moved (x0.2: global 0.9-1.1, parts 0.94-1.04)
+    cfg = load_config(ROOT / config, {"env": env} | shrunk_shape_ranges(Path(config).stem, 0.2))
+    policy = _adopted(state, cfg)
+    env_cfg = cfg.env.for_evaluation(10.0)
+    space = make_env(cfg.character, cfg.task, env_cfg).task_space
+    names = list(space.names)
+    cases = [("base", 1.0)] + [(p, v) for p in SENSITIVITY_PARAMETERS for v in SENSITIVITY_VALUES]
+    rows = []
+    for name, value in cases:
+        task = np.array([1.0 if n != name else value for n in names])
+        task[names.index("target_velocity")] = cfg.task["target_velocity"][0]
+        results = run_episodes(
+            deterministic(policy), lambda c=cfg, e=env_cfg: make_env(c.character, c.task, e),
+            np.repeat(task[None], episodes, axis=0), 8, EVAL_SEED,
+        )  # fmt: skip
+        summary = summarize(results)
+        rows.append({"parameter": name, "value": value} | summary)
+        print(f"{name} {value:g}: falls {summary['fall_percent']:.0f} %, speed "
+              f"{summary['mean_forward_speed']:.2f} m/s")  # fmt: skip
+    steps = int(state["progress"]["env_steps"])
+    report = {"variant": variant, "seed": seed, "config": config, "env_steps": steps,
+              "episodes": episodes, "bodies": rows}  # fmt: skip
+    name = f"study_sensitivity_{variant}_s{seed}_{round(steps / 1e6):g}M.json"
+    (RESULTS / name).write_text(json.dumps(report, indent=2))
+    return report
+
+
 def stopped(variant: str, seed: int) -> dict:
     """A run stopped before its budget and not evaluated (a screen that lost): its training
     curve as it stands, benchmarks/results/study_<variant>_s<seed>_stopped.json, for the
@@ -399,7 +456,7 @@ def _spread(values: list[float]) -> dict:
 def merge() -> dict:
     groups: dict[tuple[str, float], list[dict]] = {}
     for path in sorted(RESULTS.glob("study_*_s*_*M.json")):
-        if path.name.startswith(("study_probe_", "study_fragility_")):
+        if path.name.startswith(("study_probe_", "study_fragility_", "study_sensitivity_")):
             continue  # evaluations of a run's controller elsewhere, not runs
         r = json.loads(path.read_text())
         millions = float(path.stem.rsplit("_", 1)[1].removesuffix("M"))  # the run's budget
@@ -637,6 +694,7 @@ def main() -> None:
             "merge",
             "probe",
             "fragility",
+            "sensitivity",
             "fit-offsets",
             "reference",
             "headings",
@@ -673,6 +731,8 @@ def main() -> None:
         fit_offsets()
     elif args.command == "fragility":
         fragility(args.variants, args.seed)
+    elif args.command == "sensitivity":
+        sensitivity(args.variants, args.seed)
     elif args.command == "stopped":
         r = stopped(args.variants, args.seed)
         last = r["last_10_iterations"]

@@ -14,6 +14,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 PositiveFloat = Annotated[float, Field(gt=0)]
+NonNegativeFloat = Annotated[float, Field(ge=0)]
 
 # Task goals and physical conditions understood by the environments besides the character's
 # shape parameters.
@@ -284,6 +285,13 @@ class PPOConfig(Section):
         "above 2x, x1.5 below 1/2 (rsl_rl's rule), within [1e-5, 1e-2]; none: fixed lr",
     )
     obs_clip: PositiveFloat = Field(10.0, description="clip of normalized observations")
+    obs_std_floor: NonNegativeFloat = Field(
+        0.0,
+        description="least std the observation normalizer divides by (observation units: m, "
+        "rad, m/s): an input that hardly varied in training, such as a part held on a stiff "
+        "joint (the biped's torso: 0.7 mm), otherwise turns a body 2 % taller into a 7-sigma "
+        "input; 0: the experience's std",
+    )
 
     @field_validator("hidden_sizes")
     @classmethod

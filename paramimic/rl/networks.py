@@ -67,12 +67,14 @@ class ActorCritic(nn.Module):
         hidden: tuple[int, ...],
         init_log_std: float,
         obs_clip: float = 10.0,
+        obs_std_floor: float = 0.0,
     ) -> None:
         super().__init__()
         self.obs_dim, self.act_dim = obs_dim, act_dim
         self.register_buffer("obs_mean", torch.zeros(obs_dim))
         self.register_buffer("obs_std", torch.ones(obs_dim))
         self.obs_clip = obs_clip
+        self.obs_std_floor = obs_std_floor
         self.pi = mlp([obs_dim, *hidden, act_dim], out_gain=0.01)
         self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
         self.v = mlp([obs_dim, *hidden, 1], out_gain=1.0)
@@ -84,8 +86,12 @@ class ActorCritic(nn.Module):
         return list(self.v.parameters())
 
     def set_normalizer(self, stats: RunningMeanStd) -> None:
+        """Normalize by the experience's mean and std, the std at least `obs_std_floor`: an input
+        that hardly varied (a part held on a stiff joint) must not turn a small change of the
+        body into a large input (PPOConfig.obs_std_floor)."""
+        std = np.maximum(np.sqrt(stats.var + 1e-8), self.obs_std_floor)
         self.obs_mean.copy_(torch.as_tensor(stats.mean, dtype=torch.float32))
-        self.obs_std.copy_(torch.as_tensor(np.sqrt(stats.var + 1e-8), dtype=torch.float32))
+        self.obs_std.copy_(torch.as_tensor(std, dtype=torch.float32))
 
     def normalize(self, obs: torch.Tensor) -> torch.Tensor:
         return ((obs - self.obs_mean) / self.obs_std).clamp(-self.obs_clip, self.obs_clip)
