@@ -87,3 +87,22 @@ def test_the_adaptive_step_size_shrinks_on_large_kl_and_survives_a_checkpoint():
     assert restored.policy_opt.param_groups[0]["lr"] == metrics["policy_lr"]
     fixed = _learner(policy_lr=1e-3)
     assert fixed.update(_batch(np.random.default_rng(1)))["policy_lr"] == 1e-3
+
+
+def test_an_input_that_hardly_varied_is_not_blown_up_with_the_std_floored():
+    # input 0 varied by 0.7 mm in training (the biped's torso on its ball joint), input 1 by 0.3
+    rng = np.random.default_rng(0)
+    obs = np.column_stack([0.25 + 7e-4 * rng.standard_normal(4096), rng.standard_normal(4096)])
+    shifted = np.array([[0.255, 0.0]], np.float32)  # the torso 5 mm higher: a body 2 % taller
+    normalized = {}
+    for floor in (0.0, 0.02):
+        learner = _learner(obs_std_floor=floor)
+        learner.normalizer.update(np.column_stack([obs, np.zeros((4096, 2))]))
+        learner.policy.set_normalizer(learner.normalizer)
+        x = np.column_stack([shifted, np.zeros((1, 2), np.float32)])
+        normalized[floor] = learner.policy.normalize(torch.from_numpy(x))[0].numpy()
+        # the actors' numpy policy divides by the same std
+        assert learner.weights()["obs_std"][0] == pytest.approx(max(7e-4, floor), rel=0.05)
+    assert normalized[0.0][0] > 6.0  # 5 mm is ~7 sigma of the experience
+    assert normalized[0.02][0] == pytest.approx(0.25, abs=0.03)  # 5 mm / 2 cm
+    assert normalized[0.0][1] == pytest.approx(normalized[0.02][1])  # a varied input unchanged
