@@ -176,6 +176,9 @@ VARIANTS: dict[str, dict] = {
     # retargeted, it stands steadier (5-11 % falls at 2M) but still at 0.17-0.18 m/s: with the
     # stall rule that made walker_legs walk once it joined the retargeted reference
     "quadruped_x0.5_retarget_stall": FROZEN | G99 | RETARGET | STALL,
+    # with the stall rule its training return stayed at ~45 to 1M (episodes end at the stall
+    # window): can the base quadruped walk at all with this reference and reward?
+    "quadruped_base_stall": FROZEN | G99 | STALL,
     "quadruped_x0.5_std0.1_heading": STD01 | G99 | HEADING,
     "quadruped_x0.5_std0.1_heading_stall": STD01 | G99 | HEADING | STALL,
 }
@@ -199,6 +202,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5_std0.1_retarget": ("configs/biped_lower.yaml", 0.5),
     "quadruped_x0.5_retarget": ("configs/quadruped.yaml", 0.5),
     "quadruped_x0.5_retarget_stall": ("configs/quadruped.yaml", 0.5),
+    "quadruped_base_stall": ("configs/quadruped.yaml", 0.0),
     "biped_x0.5_std0.1_warm_widen": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_lr5e-5": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.05": ("configs/biped_lower.yaml", 0.5),
