@@ -63,6 +63,7 @@ FLOOR = {"ppo.obs_std_floor": 0.02}
 # the walker study's widening ranges were promoted on falls alone (WidenConfig.promote_on)
 WIDEN_FALLS = {"curriculum.widen": {"promote_on": "falls"}}
 BIPED_BASE_RUN = "runs/study/biped_base_heading0.8_std0.1_s{seed}"  # the base biped, 2M steps
+QUADRUPED_BASE_RUN = "runs/study/quadruped_base_stall_s{seed}"  # the base quadruped, 2M steps
 # a range grown from the base body in steps of 5 % of each range (the base controller, warm
 # started, falls on 57 % of bodies whose height alone varies by +-2.5 %: `fragility`)
 SLOW_WIDEN = {"curriculum.widen": {"start": 0.05, "step": 0.05, "promote_on": "falls"}}
@@ -179,6 +180,13 @@ VARIANTS: dict[str, dict] = {
     # with the stall rule its training return stayed at ~45 to 1M (episodes end at the stall
     # window): can the base quadruped walk at all with this reference and reward?
     "quadruped_base_stall": FROZEN | G99 | STALL,
+    # it walks (training return 213 at 0.94M, episodes of 9.2 s): the x0.5 family from its
+    # controller, legs retargeted, the stall rule kept
+    "quadruped_x0.5_warm_stall": FROZEN
+    | G99
+    | RETARGET
+    | STALL
+    | {"train.init_from": QUADRUPED_BASE_RUN},
     "quadruped_x0.5_std0.1_heading": STD01 | G99 | HEADING,
     "quadruped_x0.5_std0.1_heading_stall": STD01 | G99 | HEADING | STALL,
 }
@@ -203,6 +211,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "quadruped_x0.5_retarget": ("configs/quadruped.yaml", 0.5),
     "quadruped_x0.5_retarget_stall": ("configs/quadruped.yaml", 0.5),
     "quadruped_base_stall": ("configs/quadruped.yaml", 0.0),
+    "quadruped_x0.5_warm_stall": ("configs/quadruped.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_lr5e-5": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.05": ("configs/biped_lower.yaml", 0.5),
