@@ -1,5 +1,7 @@
 """Real training runs on real MuJoCo: learning, checkpoints and resume."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -96,3 +98,28 @@ def test_checkpoint_resume_restores_everything(tmp_path):
     second.train(backend2, total_steps=4 * 256)
     assert second.progress.iteration == 4  # the counter continues
     assert (tmp_path / "checkpoints" / "ckpt_000004.pt").is_file()
+
+
+def test_a_resumed_run_drops_the_logged_iterations_its_checkpoint_never_saw(tmp_path):
+    # the base walker alone: a task space without dimensions trains too
+    cfg = ExperimentConfig.model_validate(
+        {
+            "character": "walker",
+            "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1},
+            "actors": {"num_envs": 4},
+            "train": {"checkpoint_every": 2},
+        }
+    )
+    first = Trainer(cfg, tmp_path)
+    first.train(SerialBackend(cfg, first.obs_dim, first.act_dim, first.curriculum), 2 * 256)
+    # the run went on for 2 iterations after its checkpoint at 512 steps and was killed in the
+    # middle of writing a third row
+    log = tmp_path / "metrics.jsonl"
+    with log.open("a") as f:
+        f.write(json.dumps({"env_steps": 768}) + "\n" + json.dumps({"env_steps": 1024}) + "\n")
+        f.write('{"env_steps": 12')
+    second = Trainer(cfg, tmp_path)
+    second.load_state_dict(checkpoint.load(tmp_path))
+    second.train(SerialBackend(cfg, second.obs_dim, second.act_dim, second.curriculum), 3 * 256)
+    steps = [json.loads(r)["env_steps"] for r in log.read_text().splitlines()]
+    assert steps == [256, 512, 768]  # the lost rows gone, the resumed iteration logged once

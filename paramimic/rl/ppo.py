@@ -110,7 +110,7 @@ class PPOLearner:
                     f.values.ravel(),
                     adv.ravel(),
                     ret.ravel(),
-                    f.tasks[f.task_index].reshape(-1, f.tasks.shape[-1]),
+                    f.tasks[f.task_index].reshape(f.task_index.size, f.tasks.shape[-1]),
                 )
             )
         cols = [np.concatenate(c) for c in zip(*parts, strict=True)]

@@ -300,6 +300,20 @@ class Trainer:
             self.curriculum.update_motion(layers, net.version, net.mse, stage)
         return {"stage": stage, "motion_version": net.version, "motion_loss": net.mse}
 
+    def _metrics_log(self):
+        """metrics.jsonl opened to append, without the rows of iterations this run's state never
+        saw: a run stopped between checkpoints resumes from the last one, and the iterations
+        after it, logged but lost, would otherwise stay in its curve twice."""
+        path = self.run_dir / "metrics.jsonl"
+        if path.exists():
+            rows = path.read_text().splitlines(keepends=True)
+            kept = [r for r in rows if r.strip() and _logged_steps(r) <= self.progress.env_steps]
+            if len(kept) != len(rows):
+                tmp = path.with_suffix(".tmp")
+                tmp.write_text("".join(kept))
+                tmp.replace(path)
+        return path.open("a")
+
     def train(
         self,
         backend: RolloutBackend,
@@ -334,7 +348,7 @@ class Trainer:
                 on_checkpoint(path, self.progress.iteration)
 
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        log = (self.run_dir / "metrics.jsonl").open("a")
+        log = self._metrics_log()
         try:
             while self.progress.env_steps < total_steps and not should_stop():
                 if before_iteration:
@@ -366,6 +380,14 @@ class Trainer:
                     f"interrupted during an update at iteration {self.progress.iteration}: "
                     f"no checkpoint written, the last one stands"
                 )
+
+
+def _logged_steps(row: str) -> float:
+    """The env steps of a metrics.jsonl row; a torn row (the process killed mid-write): inf."""
+    try:
+        return float(json.loads(row)["env_steps"])
+    except (ValueError, KeyError, TypeError):
+        return float("inf")
 
 
 def reset_observations(cfg: ExperimentConfig, n: int = 64) -> np.ndarray:
