@@ -243,6 +243,11 @@ def variant_config(variant: str, seed: int) -> tuple[str, dict]:
     return config, overrides
 
 
+# what a result file keeps of each training iteration (metrics.jsonl)
+CURVE_KEYS = ("env_steps", "mean_return", "fall_percent", "mean_length", "std", "approx_kl",
+              "clip_fraction", "range_width")  # fmt: skip
+
+
 def _report_path(variant: str, seed: int, steps: int) -> Path:
     return RESULTS / f"study_{variant}_s{seed}_{steps / 1e6:g}M.json"
 
@@ -274,8 +279,6 @@ def run(variant: str, seed: int, steps: int) -> dict:
     backend.close()
     report = evaluate_config(trainer.learner.policy, cfg, EVAL_EPISODES, EVAL_SEED, 7, seconds=10.0)
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
-    keep = ("env_steps", "mean_return", "fall_percent", "std", "approx_kl", "clip_fraction",
-            "range_width")  # fmt: skip
     report |= {
         "variant": variant,
         "overrides": VARIANTS[variant],
@@ -284,7 +287,7 @@ def run(variant: str, seed: int, steps: int) -> dict:
         "env_steps": trainer.progress.env_steps,
         "seconds_this_session": time.perf_counter() - t0,
         "final_std": float(np.exp(trainer.learner.policy.log_std.detach().numpy()).mean()),
-        "curve": [{k: m[k] for k in keep if k in m} for m in curve],
+        "curve": [{k: m[k] for k in CURVE_KEYS if k in m} for m in curve],
     }
     RESULTS.mkdir(parents=True, exist_ok=True)
     _report_path(variant, seed, steps).write_text(json.dumps(report, indent=2))
@@ -434,16 +437,6 @@ def stopped(variant: str, seed: int) -> dict:
     record and the curves figure. (`run` continues it and writes the evaluated report.)"""
     run_dir = RUNS / f"{variant}_s{seed}"
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
-    keep = (
-        "env_steps",
-        "mean_return",
-        "fall_percent",
-        "mean_length",
-        "std",
-        "approx_kl",
-        "clip_fraction",
-        "range_width",
-    )
     tail = curve[-10:]
     report = {
         "variant": variant,
@@ -455,7 +448,7 @@ def stopped(variant: str, seed: int) -> dict:
         "last_10_iterations": {
             k: float(np.mean([m[k] for m in tail])) for k in ("mean_return", "fall_percent")
         },
-        "curve": [{k: m[k] for k in keep if k in m} for m in curve],
+        "curve": [{k: m[k] for k in CURVE_KEYS if k in m} for m in curve],
     }
     (RESULTS / f"study_{variant}_s{seed}_stopped.json").write_text(json.dumps(report, indent=2))
     return report
@@ -553,6 +546,18 @@ CURVES = {
             "biped_x0.5_std0.1_warm_widen0.7",
         ),
         WIDTH_PANEL,
+    ),
+    "study_curves_quadruped.png": (
+        "quadruped: the x0.5 family from scratch, the base body and the family from its "
+        "controller, training curves per seed",
+        (
+            "quadruped_x0.5",
+            "quadruped_x0.5_retarget",
+            "quadruped_x0.5_retarget_stall",
+            "quadruped_base_stall",
+            "quadruped_x0.5_warm_stall",
+        ),
+        ("mean_length", "training episode length (control steps, 30 per s)"),
     ),
 }
 
