@@ -45,7 +45,9 @@ EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
 # Every variant states the knobs the study varies, so that it means the same whatever the
 # config ships (configs/walker_legs.yaml now carries the winner, `retarget_stall`); a variant that
-# does not name env.retarget runs without it (`variant_config`), as it was measured.
+# does not name env.retarget or the stall rule runs without them (`variant_config`), as it was
+# measured.
+UNNAMED = {"env.retarget": False, "env.stall_speed_ratio": None}
 LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
 STD01 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
@@ -104,8 +106,10 @@ VARIANTS: dict[str, dict] = {
     "std_frozen_gamma99_stall_widen": FROZEN | G99 | WIDEN_FALLS | {"env.stall_speed_ratio": 0.5},
     # the bells multiplied, not added (env.reward.combine): standing still stops paying half
     # of a walking step (the sum's end-effector, direction and torque bells)
-    "product": FROZEN | G99 | PRODUCT,
-    "product_g95": FROZEN | G95 | PRODUCT,
+    # (measured with the stall rule, which walker_legs.yaml shipped by then and variant_config
+    # did not yet switch off for variants that do not name it: STALL keeps what they measured)
+    "product": FROZEN | G99 | PRODUCT | STALL,
+    "product_g95": FROZEN | G95 | PRODUCT | STALL,
     # every leg follows the base leg's hip-to-ankle path scaled by the shortest leg
     # (env.retarget): a reference that bodies with legs of unequal length can follow; with the
     # stall rule, the winner: what configs/walker_legs.yaml ships (`_k0`: uniform sampling)
@@ -230,7 +234,7 @@ def variant_config(variant: str, seed: int) -> tuple[str, dict]:
     config, scale = OTHER_CONFIGS.get(variant, (CONFIG, 1.0))
     overrides = {
         k: ROOT / v.format(seed=seed) if k == "train.init_from" else v
-        for k, v in ({"env.retarget": False} | VARIANTS[variant]).items()
+        for k, v in (UNNAMED | VARIANTS[variant]).items()
     }
     if scale != 1.0:
         from normalization import shrunk_shape_ranges

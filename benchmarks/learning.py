@@ -350,12 +350,13 @@ def targets() -> list[dict]:
         # as for walker_legs, a speed keeps the falls honest: a family that stands does not fall
         row = _falls_row(variant, budget, 25.0)
         row["met"] = row["met"] and min(row["measured"]["forward_speed"], default=0) >= WALKING
-        target = (f"{character} at x0.5 shape ranges: <= 25 % falls within 10M steps (measured "
-                  f"at {budget}M), walking (speed >= {WALKING} m/s)")  # fmt: skip
+        target = (f"{character} at x0.5 shape ranges: <= 25 % falls within 10M steps (family "
+                  f"measured at {budget}M), walking (speed >= {WALKING} m/s)")  # fmt: skip
         if source:  # the base body's runs first, each family seed from its seed's controller
             before = _falls_row(*source, 100.0)["command"]
             row["command"] = f"{before} && {row['command']}"
-            target += f", warm started from {source[0]} ({source[1]}M, the same seed)"
+            target += (f", warm started from {source[0]} ({source[1]}M, the same seed; "
+                       f"{budget + source[1]}M steps in all)")  # fmt: skip
         rows.append({"target": target} | row)
     rows.append(
         {"target": "the base biped_lower walking: <= 10 % falls within 2M steps"}
