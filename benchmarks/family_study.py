@@ -558,6 +558,8 @@ CURVES = {
             "biped_x0.5_std0.1_nofit",
             "biped_x0.5_std0.1_warm_widen",
             "biped_x0.5_std0.1_warm_widen0.7",
+            "biped_x0.5_std0.1_floor",
+            "biped_x0.5_std0.1_floor_warm",
         ),
         WIDTH_PANEL,
     ),
