@@ -45,9 +45,9 @@ EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
 # Every variant states the knobs the study varies, so that it means the same whatever the
 # config ships (configs/walker_legs.yaml now carries the winner, `retarget_stall`); a variant that
-# does not name env.retarget or the stall rule runs without them (`variant_config`), as it was
-# measured.
-UNNAMED = {"env.retarget": False, "env.stall_speed_ratio": None}
+# does not name env.retarget, the stall rule or the normalizer's floor runs without them
+# (`variant_config`), as it was measured (configs/biped_lower.yaml ships the floor).
+UNNAMED = {"env.retarget": False, "env.stall_speed_ratio": None, "ppo.obs_std_floor": 0.0}
 LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
 STD01 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}

@@ -284,7 +284,7 @@ def _brief(r: dict) -> dict:
 # configs/walker_legs.yaml's recipe as a family_study variant, its uniform-sampling twin (k = 0)
 # and the budget (millions of env steps) their rows are measured at
 SHIPPED = ("retarget_stall", "retarget_stall_k0", 2)
-BIPED_BASE = "biped_base_heading0.8_std0.1"  # configs/biped_lower.yaml's recipe, base body
+BIPED_BASE = "biped_base_heading0.8_std0.1_floor"  # configs/biped_lower.yaml's recipe, base body
 # the x0.5 rows: the variant that runs each config's recipe at x0.5 shape ranges
 # (variant, its budget in millions of env steps, the runs it warm starts from: variant, millions)
 X05 = {
