@@ -592,7 +592,7 @@ def _plot_curves(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     variants = [v for v in variants if any(v == g for g, _ in groups)]
     for i, variant in enumerate(variants):
@@ -609,9 +609,12 @@ def _plot_curves(
     for ax, label in zip(axes, ("training falls (%)", "training return", panel[1]), strict=True):
         ax.set_title(label)
         ax.set_xlabel("env steps (M)")
-    axes[0].legend(fontsize=7)
+    # below the panels, where it hides no curve: one entry per variant
+    handles, labels = axes[0].get_legend_handles_labels()
+    columns = min(len(labels), 5) or 1
+    fig.legend(handles, labels, loc="lower center", ncol=columns, fontsize=7, frameon=False)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04 + 0.05 * -(-len(labels) // columns), 1, 1))
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
