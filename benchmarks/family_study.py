@@ -369,7 +369,6 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
 
     from paramimic.config import load_config
     from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, run_episodes, summarize
 
     config = variant_config(variant, seed)[0]
     state, env = _run_state(variant, seed)
@@ -382,18 +381,34 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
         env_cfg = cfg.env.for_evaluation(10.0)
         space = make_env(cfg.character, cfg.task, env_cfg).task_space
         tasks = space.sample(np.random.default_rng(EVAL_SEED), episodes)
-        results = run_episodes(
-            deterministic(policy), lambda c=cfg, e=env_cfg: make_env(c.character, c.task, e),
-            tasks, 8, EVAL_SEED,
-        )  # fmt: skip
-        summary = summarize(results)
+        summary = _on_bodies(policy, cfg, env_cfg, tasks)
         rows.append({"shape_scale": scale, "varying": prefix or "all"} | summary)
         print(f"shape scale {scale:g}, varying {prefix or 'all'}: falls "
               f"{summary['fall_percent']:.1f} %, return {summary['mean_return']:.0f}")  # fmt: skip
+    return _controller_report("fragility", variant, seed, state, episodes, {"families": rows})
+
+
+def _on_bodies(policy, cfg, env_cfg, tasks: np.ndarray) -> dict:
+    """The deterministic controller, one episode per task of `cfg`'s env: `summarize`'s dict."""
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, run_episodes, summarize
+
+    results = run_episodes(
+        deterministic(policy), lambda: make_env(cfg.character, cfg.task, env_cfg), tasks, 8,
+        EVAL_SEED,
+    )  # fmt: skip
+    return summarize(results)
+
+
+def _controller_report(
+    kind: str, variant: str, seed: int, state: dict, episodes: int, rows: dict
+) -> dict:
+    """benchmarks/results/study_<kind>_<variant>_s<seed>_<M>M.json (M: the checkpoint's env
+    steps) of a run's controller measured on other bodies, `episodes` per body or family."""
     steps = int(state["progress"]["env_steps"])
-    report = {"variant": variant, "seed": seed, "config": config, "env_steps": steps,
-              "episodes": episodes, "families": rows}  # fmt: skip
-    name = f"study_fragility_{variant}_s{seed}_{round(steps / 1e6):g}M.json"
+    report = {"variant": variant, "seed": seed, "config": variant_config(variant, seed)[0],
+              "env_steps": steps, "episodes": episodes} | rows  # fmt: skip
+    name = f"study_{kind}_{variant}_s{seed}_{round(steps / 1e6):g}M.json"
     (RESULTS / name).write_text(json.dumps(report, indent=2))
     return report
 
@@ -414,7 +429,6 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
 
     from paramimic.config import load_config
     from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, run_episodes, summarize
 
     config = variant_config(variant, seed)[0]
     state, env = _run_state(variant, seed)
@@ -429,20 +443,11 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     for name, value in cases:
         task = np.array([1.0 if n != name else value for n in names])
         task[names.index("target_velocity")] = cfg.task["target_velocity"][0]
-        results = run_episodes(
-            deterministic(policy), lambda c=cfg, e=env_cfg: make_env(c.character, c.task, e),
-            np.repeat(task[None], episodes, axis=0), 8, EVAL_SEED,
-        )  # fmt: skip
-        summary = summarize(results)
+        summary = _on_bodies(policy, cfg, env_cfg, np.repeat(task[None], episodes, axis=0))
         rows.append({"parameter": name, "value": value} | summary)
         print(f"{name} {value:g}: falls {summary['fall_percent']:.0f} %, speed "
               f"{summary['mean_forward_speed']:.2f} m/s")  # fmt: skip
-    steps = int(state["progress"]["env_steps"])
-    report = {"variant": variant, "seed": seed, "config": config, "env_steps": steps,
-              "episodes": episodes, "bodies": rows}  # fmt: skip
-    name = f"study_sensitivity_{variant}_s{seed}_{round(steps / 1e6):g}M.json"
-    (RESULTS / name).write_text(json.dumps(report, indent=2))
-    return report
+    return _controller_report("sensitivity", variant, seed, state, episodes, {"bodies": rows})
 
 
 def stopped(variant: str, seed: int) -> dict:
