@@ -169,9 +169,9 @@ VARIANTS: dict[str, dict] = {
     "biped_x0.5_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
     "biped_x0.5_std0.1_nofit": STD01 | G99 | HEADING | {"env.ground_fit": False},
     # the base gait hinges on the torso (`sensitivity`: 90-100 % falls with the torso 2 % shorter
-    # or taller): its position in the root frame, held by a stiff ball joint, varied by 0.7 mm
-    # in the base body's training, so the normalizer turned 5 mm into 7 sigma: the normalizer's
-    # std floored at 2 cm / 0.02 rad (ppo.obs_std_floor), on the base body and the x0.5 family
+    # or taller): its height in the root frame, held by a stiff ball joint, varied by 0.2-0.7 mm
+    # in the base body's training, so 2 % moved that input 5-17 sigma: the normalizer's std
+    # floored at 2 cm / 0.02 rad (ppo.obs_std_floor), on the base body and the x0.5 family
     "biped_base_heading0.8_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
     "biped_x0.5_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
     # the floored base controller falls on 15 % of x0.05 bodies (without the floor: 67.5 %): the
@@ -429,6 +429,7 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
 
     from paramimic.config import load_config
     from paramimic.envs import make_env
+    from paramimic.rl.ppo import CONSTANT
 
     config = variant_config(variant, seed)[0]
     state, env = _run_state(variant, seed)
@@ -436,18 +437,32 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     cfg = load_config(ROOT / config, {"env": env} | shrunk_shape_ranges(Path(config).stem, 0.2))
     policy = _adopted(state, cfg)
     env_cfg = cfg.env.for_evaluation(10.0)
-    space = make_env(cfg.character, cfg.task, env_cfg).task_space
-    names = list(space.names)
+    probe_env = make_env(cfg.character, cfg.task, env_cfg)
+    names = list(probe_env.task_space.names)
+    # the inputs that varied least in the run's training (its normalizer's std; inputs that never
+    # varied, such as the fixed shape parameters, aside), and how far each body moves them at
+    # its first step, in those standard deviations (the same reset seed: the same phase)
+    layout = probe_env.observation_layout()
+    inputs = [f"{segment}[{i}]" for segment, size in layout for i in range(size)]
+    std = np.sqrt(np.asarray(state["learner"]["normalizer"]["var"], dtype=float))
+    least = [k for k in np.argsort(std) if std[k] ** 2 > CONSTANT][:5]
+    first = {}
     cases = [("base", 1.0)] + [(p, v) for p in SENSITIVITY_PARAMETERS for v in SENSITIVITY_VALUES]
     rows = []
     for name, value in cases:
         task = np.array([1.0 if n != name else value for n in names])
         task[names.index("target_velocity")] = cfg.task["target_velocity"][0]
+        first[name, value] = probe_env.reset(seed=EVAL_SEED, options={"task": task})[0][least]
+        shift = (first[name, value] - first["base", 1.0]) / std[least]
         summary = _on_bodies(policy, cfg, env_cfg, np.repeat(task[None], episodes, axis=0))
-        rows.append({"parameter": name, "value": value} | summary)
+        moved = {inputs[k]: float(x) for k, x in zip(least, shift, strict=True)}
+        rows.append(
+            {"parameter": name, "value": value} | summary | {"least_varied_shift_sigma": moved}
+        )
         print(f"{name} {value:g}: falls {summary['fall_percent']:.0f} %, speed "
               f"{summary['mean_forward_speed']:.2f} m/s")  # fmt: skip
-    return _controller_report("sensitivity", variant, seed, state, episodes, {"bodies": rows})
+    extra = {"bodies": rows, "least_varied_inputs": {inputs[k]: float(std[k]) for k in least}}
+    return _controller_report("sensitivity", variant, seed, state, episodes, extra)
 
 
 def stopped(variant: str, seed: int) -> dict:

@@ -289,8 +289,8 @@ class PPOConfig(Section):
         0.0,
         description="least std the observation normalizer divides by (observation units: m, "
         "rad, m/s): an input that hardly varied in training, such as a part held on a stiff "
-        "joint (the biped's torso: 0.7 mm), otherwise turns a body 2 % taller into a 7-sigma "
-        "input; 0: the experience's std",
+        "joint (the biped's torso: 0.2-0.7 mm), otherwise turns a body 2 % taller into an "
+        "input 7-24 sigma off; 0: the experience's std",
     )
 
     @field_validator("hidden_sizes")
