@@ -499,6 +499,14 @@ class ExperimentConfig(Section):
         "(b_g 0.5-1.5, b_l 0.7-1.2 for the [WL19] §5.3 characters) to the task space; "
         "entries in `task` override single ranges",
     )
+    shape_scale: float = Field(
+        1.0,
+        ge=0.0,
+        le=1.0,
+        description="with shape_space 'full': every documented shape range shrunk toward the "
+        "base body, [1 - s(1 - lo), 1 + s(hi - 1)] (0.5: the x0.5 families of the study; 0: the "
+        "base body alone)",
+    )
     env: EnvConfig = EnvConfig()
     ppo: PPOConfig = PPOConfig()
     curriculum: CurriculumConfig = CurriculumConfig()
@@ -550,8 +558,13 @@ class ExperimentConfig(Section):
             params = _registry().get_character(self.character).shape_params
             if not params:
                 raise ValueError(f"shape_space: {self.character!r} has no shape parameters")
-            full = {p.name: (p.low, p.high) for p in params}
+            s = self.shape_scale
+            full = {p.name: (1 - s * (1 - p.low), 1 + s * (p.high - 1)) for p in params}
             object.__setattr__(self, "task", full | dict(self.task))
+        elif self.shape_scale != 1.0:
+            raise ValueError(
+                "shape_scale: shrinks the documented shape ranges of shape_space 'full'"
+            )
         return self
 
     @model_validator(mode="after")
@@ -744,6 +757,7 @@ RESUME_FIXED = (
     "character",
     "task",
     "shape_space",
+    "shape_scale",
     "env",
     "ppo.hidden_sizes",
     "ppo.learn_std",

@@ -86,6 +86,10 @@ def train(
         ),
     ] = False,
     seed: Annotated[int | None, typer.Option(help="override train.seed")] = None,
+    init_from: Annotated[
+        Path | None,
+        typer.Option(help="override train.init_from: warm start from this run's controller"),
+    ] = None,
 ) -> None:
     """Train a controller for CONFIG: Redis, Ray actors, the sampler and the API, or --serial."""
     from services.launch.training import LaunchError, LaunchOptions, run_training
@@ -97,6 +101,7 @@ def train(
             "train.total_steps": total_steps,
             "train.seed": seed,
             "train.run_dir": str(run_dir) if run_dir else None,
+            "train.init_from": str(init_from) if init_from else None,
         }.items()
         if v is not None
     }

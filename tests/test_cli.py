@@ -87,6 +87,31 @@ def test_resume_if_exists_starts_a_new_run_then_continues_it(tmp_path):
     assert "resumed at iteration 2" in res.stdout
 
 
+def test_a_family_trains_from_its_base_stage_with_init_from(tmp_path):
+    """The two-stage recipe of configs/quadruped_base.yaml -> quadruped_x0.5.yaml as a user runs
+    it: the base body alone (shape_scale 0), then the family from its controller."""
+    stage = TINY | {"task": {"target_velocity": [1, 1]}, "shape_space": "full"}
+    base_cfg, family_cfg = tmp_path / "base.yaml", tmp_path / "family.yaml"
+    base_cfg.write_text(yaml.safe_dump(stage | {"shape_scale": 0.0}))
+    family_cfg.write_text(yaml.safe_dump(stage | {"shape_scale": 0.5}))
+    base, family = tmp_path / "base", tmp_path / "family"
+    # a source that is not there fails before anything starts, naming the field
+    res = _cli("train", family_cfg, "--serial", "--run-dir", family, "--init-from", tmp_path / "x")
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "train.init_from" in res.stdout and "no checkpoint or run directory" in res.stdout
+    assert not family.exists()
+    for cfg, run, more in ((base_cfg, base, ()), (family_cfg, family, ("--init-from", base))):
+        res = _cli("train", cfg, "--serial", "--run-dir", run, *more)
+        assert res.returncode == 0, res.stdout + res.stderr
+    import torch
+
+    state = torch.load(family / "checkpoints" / "latest.pt", weights_only=False)
+    assert state["config"]["train"]["init_from"] == str(base)
+    assert state["config"]["task"]["leg_length"] == [0.75, 1.25]  # the hopper's 0.5-1.5, halved
+    first = torch.load(base / "checkpoints" / "latest.pt", weights_only=False)
+    assert first["config"]["task"]["leg_length"] == [1.0, 1.0]
+
+
 SKILL = {
     "character": "walker",
     "task": {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]},

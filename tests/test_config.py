@@ -63,6 +63,9 @@ def _write(tmp_path, text):
         ("task: {left_leg_length: [0.8, .inf]}", "task.left_leg_length", "finite number"),
         ("task: {left_leg_length: [0.8, 2.5]}", "task.left_leg_length", "supports, [0.5, 1.5]"),
         ("train: {seed: -1}", "train.seed", "greater than or equal to 0"),
+        # Part 9: a family's shape ranges shrunk toward the base body
+        ("shape_scale: 0.5", "(config)", "shape_scale: shrinks the documented shape ranges"),
+        ("shape_space: full\nshape_scale: 1.5", "shape_scale", "less than or equal to 1"),
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):
@@ -88,6 +91,39 @@ def test_physics_rate_defaults_to_the_characters_and_old_configs_keep_theirs(tmp
     assert (old.env.physics_hz, old.env.frame_skip) == (600, 20)
     chosen = load_config(_write(tmp_path, "character: quadruped\nenv: {physics_hz: 150}"))
     assert chosen.env.frame_skip == 5
+
+
+def test_shape_scale_shrinks_every_documented_range_toward_the_base_body(tmp_path):
+    """`shape_scale` s: [1 - s(1 - lo), 1 + s(hi - 1)] per shape parameter; a `task` entry still
+    overrides its range; 0 is the base body alone."""
+    from paramimic.characters import get_character
+
+    params = get_character("quadruped").shape_params
+    half = load_config(
+        _write(tmp_path, "character: quadruped\nshape_space: full\nshape_scale: 0.5\n"
+               "task: {head_x: [0.9, 1.0]}")
+    )  # fmt: skip
+    for p in params:
+        want = (0.9, 1.0) if p.name == "head_x" else (1 - (1 - p.low) / 2, 1 + (p.high - 1) / 2)
+        assert half.task[p.name] == pytest.approx(want), p.name
+    assert half.task["global_x"] == pytest.approx((0.75, 1.25))  # [WL19] §5.3's 0.5-1.5, halved
+    base = load_config(_write(tmp_path, "character: quadruped\nshape_space: full\nshape_scale: 0"))
+    assert all(base.task[p.name] == (1.0, 1.0) for p in params)
+
+
+def test_the_quadruped_family_config_is_its_base_stage_widened():
+    """configs/quadruped_x0.5.yaml warm starts from configs/quadruped_base.yaml's run: the same
+    body, rules and PPO but for what the family stage adds (README "Families that learn")."""
+    root = Path(__file__).parent.parent / "configs"
+    base = load_config(root / "quadruped_base.yaml").model_dump()
+    family = load_config(root / "quadruped_x0.5.yaml").model_dump()
+    assert (base["shape_scale"], family["shape_scale"]) == (0.0, 0.5)
+    assert (base["env"]["retarget"], family["env"]["retarget"]) == (False, True)
+    assert (base["ppo"]["desired_kl"], family["ppo"]["desired_kl"]) == (None, 0.01)
+    for cfg in (base, family):
+        del cfg["name"], cfg["task"], cfg["shape_scale"], cfg["env"]["retarget"]
+        del cfg["ppo"]["desired_kl"], cfg["train"]["run_dir"]
+    assert base == family
 
 
 SKILL_CONFIGS = [p for p in CONFIGS if "clip:" in p.read_text()]
