@@ -54,13 +54,14 @@ PPO_PRESETS = {
 
 
 def shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
-    """Every shape range of the character shrunk toward 1 by `scale`."""
+    """Every shape range of the character shrunk toward 1 by `scale` (the config's
+    `shape_scale`, as task ranges: the runs measured before it existed name them so)."""
     from paramimic.characters import get_character
+    from paramimic.config import ExperimentConfig
 
-    return {
-        p.name: [1 - scale * (1 - p.low), 1 + scale * (p.high - 1)]
-        for p in get_character(character).shape_params
-    }
+    cfg = {"character": character, "shape_space": "full", "shape_scale": scale}
+    task = ExperimentConfig.model_validate(cfg).task
+    return {p.name: list(task[p.name]) for p in get_character(character).shape_params}
 
 
 def shrunk_shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
