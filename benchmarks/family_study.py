@@ -182,6 +182,13 @@ VARIANTS: dict[str, dict] = {
     | FLOOR
     | RETARGET
     | {"train.init_from": BIPED_FLOOR_RUN},
+    # what made the quadruped family from its base controller meet its target: a small step
+    "biped_x0.5_std0.1_floor_warm_kl": STD01
+    | G99
+    | HEADING
+    | FLOOR
+    | RETARGET
+    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -250,6 +257,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_base_heading0.8_std0.1_floor": ("configs/biped_lower.yaml", 0.0),
     "biped_x0.5_std0.1_floor": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_floor_warm": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.5_std0.1_floor_warm_kl": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
 }
 
@@ -595,6 +603,7 @@ CURVES = {
             "biped_x0.5_std0.1_warm_widen0.7",
             "biped_x0.5_std0.1_floor",
             "biped_x0.5_std0.1_floor_warm",
+            "biped_x0.5_std0.1_floor_warm_kl",
         ),
         WIDTH_PANEL,
     ),
