@@ -198,7 +198,7 @@ VARIANTS: dict[str, dict] = {
     | RETARGET
     | SLOW_WIDEN
     | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
-    # its range grew by 5 % per 0.2-0.6M steps (20 % at 1.3M), promoted below 50 % training falls
+    # its range grew by 5 % per 0.04-0.6M steps (20 % at 1.3M), promoted below 50 % training falls
     # where the base body's own training episodes fell 40 % with the policy's noise: below 60 %
     # (with the full step, below 70 % collapsed the controller: `_warm_widen0.7`)
     "biped_x0.5_std0.1_floor_warm_widen0.6_kl": STD01
@@ -662,11 +662,14 @@ def _plot_curves(
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = plt.get_cmap("tab20").colors  # up to 20 variants a figure, each its own colour
     variants = [v for v in variants if any(v == g for g, _ in groups)]
     for i, variant in enumerate(variants):
-        # the budget with the most seeds, the longest of those (its curve holds the shorter's)
-        _, runs = max(((len(g), m), g) for (v, m), g in groups.items() if v == variant)
+        # per seed its longest run (a longer run's curve holds the shorter's)
+        longest = {}
+        for (v, _), g in sorted(groups.items(), key=lambda item: item[0][1]):
+            longest |= {r["seed"]: r for r in g} if v == variant else {}
+        runs = [longest[seed] for seed in sorted(longest)]
         for j, r in enumerate(runs):
             x = [m["env_steps"] / 1e6 for m in r["curve"]]
             for ax, key in zip(axes, ("fall_percent", "mean_return", panel[0]), strict=True):
