@@ -667,8 +667,8 @@ def _plot_curves(
     for i, variant in enumerate(variants):
         # per seed its longest run (a longer run's curve holds the shorter's)
         longest = {}
-        for (v, _), g in sorted(groups.items(), key=lambda item: item[0][1]):
-            longest |= {r["seed"]: r for r in g} if v == variant else {}
+        for _, g in sorted((m, g) for (v, m), g in groups.items() if v == variant):
+            longest |= {r["seed"]: r for r in g}
         runs = [longest[seed] for seed in sorted(longest)]
         for j, r in enumerate(runs):
             x = [m["env_steps"] / 1e6 for m in r["curve"]]
