@@ -70,6 +70,17 @@ QUADRUPED_BASE_RUN = "runs/study/quadruped_base_stall_s{seed}"  # the base quadr
 # a range grown from the base body in steps of 5 % of each range (the base controller, warm
 # started, falls on 57 % of bodies whose height alone varies by +-2.5 %: `fragility`)
 SLOW_WIDEN = {"curriculum.widen": {"start": 0.05, "step": 0.05, "promote_on": "falls"}}
+# the same steps judged at the range's edge by the deterministic policy (WidenConfig `edge`)
+EDGE_WIDEN = {
+    "curriculum.widen": {
+        "start": 0.05,
+        "step": 0.05,
+        "promote_on": "edge",
+        "window": 16,
+        "promote_below": 0.25,
+        "check_every": 10,
+    }
+}
 VARIANTS: dict[str, dict] = {
     # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
     "learned_std": LEARNED | G95,
@@ -208,6 +219,15 @@ VARIANTS: dict[str, dict] = {
     | RETARGET
     | {"curriculum.widen": SLOW_WIDEN["curriculum.widen"] | {"promote_below": 0.6}}
     | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
+    # the range judged by ADR's boundary test instead: every 10 iterations, the mean action on 16
+    # bodies at the range's edge; it grows 5 % when fewer than 25 % of them fell
+    "biped_x0.5_std0.1_floor_warm_edge_kl": STD01
+    | G99
+    | HEADING
+    | FLOOR
+    | RETARGET
+    | EDGE_WIDEN
+    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
     "quadruped_x0.5": FROZEN | G99,
     # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
     # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
@@ -279,6 +299,7 @@ OTHER_CONFIGS: dict[str, tuple[str, float]] = {
     "biped_x0.5_std0.1_floor_warm_kl": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_floor_warm_widen_kl": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_floor_warm_widen0.6_kl": ("configs/biped_lower.yaml", 0.5),
+    "biped_x0.5_std0.1_floor_warm_edge_kl": ("configs/biped_lower.yaml", 0.5),
     "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
 }
 

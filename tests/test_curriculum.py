@@ -137,6 +137,25 @@ def test_v_bar_sampling_runs_inside_the_current_range_and_the_width_survives_a_r
     assert (d.width, d.window) == (0.5, [3, 1])
 
 
+def test_an_edge_judged_range_grows_on_its_edge_test_not_on_training_episodes():
+    c = _widening(start=0.4, step=0.3, promote_below=0.25, promote_on="edge")
+    edge = c.edge_tasks(50, seed=1)
+    half = 0.5 * c.space.width
+    offset = np.abs(edge - c.space.center)[:, :2] / half[:2]  # legs 0.8-1.2, torso 0.9-1.1
+    np.testing.assert_allclose(offset.max(axis=1), 0.4)  # one bound reached in each row
+    assert offset.min() < 0.3  # the other dims anywhere inside the range
+    np.testing.assert_array_equal(edge[:, 2], 1.0)  # the fixed velocity stays put
+    np.testing.assert_array_equal(edge, c.edge_tasks(50, seed=1))  # the seed decides
+    c.ingest(_episodes(30, falls=0))  # training episodes do not judge this range
+    assert c.width == pytest.approx(0.4)
+    assert c.judge_edge(16, falls=4) == pytest.approx(0.4)  # 25 % fell: not below 25 %
+    assert c.judge_edge(16, falls=3) == pytest.approx(0.7)
+    assert c.judge_edge(16, falls=0) == 1.0 and c.edge_tasks(4, seed=0) is None  # whole
+    d = _widening(start=0.4, promote_on="edge")
+    d.from_state(c.to_state())
+    assert d.width == 1.0
+
+
 def test_without_widen_the_range_is_whole():
     c = _curriculum(TWO)
     assert c.width == 1.0

@@ -95,6 +95,23 @@ def test_a_new_sampler_on_the_same_run_continues_exactly_where_it_was(redis_serv
     assert grid["dims"] == ["leg_length", "torso_length"] and len(grid["values"]) == 21
 
 
+def test_the_learners_edge_test_widens_the_range_in_one_transaction(redis_server, run_id):
+    raw = _cfg().model_dump(mode="json")
+    raw["curriculum"]["widen"] = {"start": 0.2, "step": 0.1, "promote_on": "edge"}
+    a = SamplerService(raw, redis_server.url, run_id)
+    tasks = a.edge_tasks(8, 5)
+    assert tasks.shape == (8, 3) and np.all(np.abs(tasks[:, 0] - 1.0) <= 0.2 * 0.2 + 1e-12)
+    assert a.judge_edge(16, 12) == pytest.approx(0.2)  # 75 % fell: stays
+    assert a.judge_edge(16, 2) == pytest.approx(0.3)
+    b = SamplerService(raw, redis_server.url, run_id, restarted=True)
+    assert b.curriculum.width == pytest.approx(0.3) and b.summary()["range_width"] == 0.3
+    events = redis.Redis.from_url(redis_server.url, decode_responses=True).xrange(
+        RunKeys(run_id).events
+    )
+    widened = [f["message"] for _, f in events if f["type"] == "range_widened"]
+    assert widened == ["range widened to 30% (2 of 16 fell at its edge)"]
+
+
 class Gate:
     """Holds the learner before its next iteration while closed; `held` says it is waiting."""
 

@@ -98,6 +98,24 @@ def test_a_widening_family_reports_its_width_each_iteration(tmp_path):
     assert np.all(np.abs(legs - 1.0) <= 0.3 * width + 1e-9)
 
 
+def test_an_edge_judged_family_tests_its_mean_action_at_the_edge_every_few_iterations(tmp_path):
+    raw = _config(tmp_path, "edge", (0.7, 1.3)).model_dump()
+    # 0.3 s episodes: too short to fall, so every test passes and the range grows each time
+    raw["env"]["max_episode_seconds"] = 0.3
+    raw["curriculum"]["widen"] = {"start": 0.3, "step": 0.2, "window": 5, "check_every": 2,
+                                  "promote_on": "edge", "promote_below": 0.2}  # fmt: skip
+    cfg = ExperimentConfig.model_validate(raw)
+    trainer = Trainer(cfg, tmp_path / "edge")
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    rows = [trainer.iteration(backend) for _ in range(4)]
+    backend.close()
+    # tested after iterations 2 and 4 (0-based progress 1 -> 2, 3 -> 4), on 5 bodies of 9 steps
+    assert [r.get("edge_fall_percent") for r in rows] == [None, 0.0, None, 0.0]
+    assert [r.get("edge_env_steps") for r in rows] == [None, 45, None, 45]
+    assert [r["range_width"] for r in rows] == pytest.approx([0.3, 0.5, 0.5, 0.7])
+    assert trainer.progress.env_steps == 4 * 256  # the tests' steps are not training samples
+
+
 def test_a_missing_source_fails_when_the_config_loads(tmp_path):
     with pytest.raises(ValueError, match="init_from"):
         _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))

@@ -109,18 +109,42 @@ class AdaptiveCurriculum:
         return n
 
     def _widen(self, episode: dict) -> None:
-        """Count an episode toward the next widening decision (`WidenConfig`)."""
+        """Count a training episode toward the next widening decision (`WidenConfig`)."""
         rule = self.config.widen
-        if rule is None or self.width >= 1.0:
+        if rule is None or rule.promote_on == "edge" or self.width >= 1.0:
             return
         self.window[0] += 1
         self.window[1] += int(
             bool(episode["ended_early" if rule.promote_on == "early_ends" else "fell"])
         )
         if self.window[0] >= rule.window:
-            if self.window[1] < rule.promote_below * self.window[0]:
-                self.width = min(1.0, self.width + rule.step)
+            self._promote(*self.window)
             self.window = [0, 0]
+
+    def _promote(self, episodes: int, failed: int) -> None:
+        """The widening rule: grow by `step` when fewer than `promote_below` of them failed."""
+        rule = self.config.widen
+        if failed < rule.promote_below * episodes:
+            self.width = min(1.0, round(self.width + rule.step, 9))  # no 0.30000000000000004
+
+    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None:
+        """n tasks on the current range's edge (`promote_on: edge`), or None once the range is
+        whole: uniform in the range, each pushed out along its offset from the centre until one
+        free dimension sits at the range's bound (ADR's boundary sampling, one width for all)."""
+        if self.width >= 1.0:
+            return None
+        rng = np.random.default_rng(seed)
+        center, half = self.space.center, 0.5 * self.space.width
+        u = np.where(self.space.free, rng.uniform(-1.0, 1.0, (n, self.space.dim)), 0.0)
+        u /= np.maximum(np.abs(u).max(axis=1, keepdims=True), 1e-12)
+        return center + self.width * u * half
+
+    def judge_edge(self, episodes: int, falls: int) -> float:
+        """The edge test's outcome (`edge_tasks`' episodes and how many fell) decides a
+        widening; returns the width in use next."""
+        if self.width < 1.0:
+            self._promote(episodes, falls)
+        return self.width
 
     def set_k(self, k: float) -> None:
         if not k >= 0:

@@ -100,6 +100,12 @@ class SamplerClient:
     def set_k(self, k: float) -> None:
         self._get("set_k", k)
 
+    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None:
+        return self._get("edge_tasks", n, seed)
+
+    def judge_edge(self, episodes: int, falls: int) -> float:
+        return self._get("judge_edge", episodes, falls)
+
     def summary(self) -> dict:
         return self._get("summary")
 

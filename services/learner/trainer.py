@@ -26,6 +26,7 @@ from paramimic.curriculum.marginal_value import MarginalValue
 from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
+from paramimic.evaluation import deterministic, run_episodes
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.ppo import PPOLearner, adopt_controller
 from paramimic.rl.rollout import (
@@ -60,6 +61,10 @@ class Curriculum(Protocol):
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None: ...
 
     def set_k(self, k: float) -> None: ...
+
+    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None: ...
+
+    def judge_edge(self, episodes: int, falls: int) -> float: ...
 
     # [L21] curricula only (SkillCurriculum, or the sampler actor that owns one)
     def elite_data(self) -> tuple[np.ndarray, np.ndarray]: ...
@@ -278,9 +283,38 @@ class Trainer:
         if self.skill:
             metrics.update(self.update_motion(metrics.get("mean_return")))
         if cfg.curriculum.widen is not None:  # how much of the task range is in use
+            metrics.update(self.test_edge())
             metrics["range_width"] = self.curriculum.summary()["range_width"]
         self.bad_updates = self.bad_updates + 1 if metrics["skipped_steps"] else 0
         return metrics
+
+    def test_edge(self) -> dict:
+        """`curriculum.widen.promote_on: edge`: every `check_every` iterations, the policy's
+        mean action on `window` bodies at the range's edge, episodes of the evaluation's
+        horizon; the curriculum widens the range when few fell. Its steps are not training
+        samples (`edge_env_steps`: simulated besides env_steps)."""
+        cfg, it = self.cfg, self.progress.iteration
+        rule = cfg.curriculum.widen
+        if rule.promote_on != "edge" or it % rule.check_every:
+            return {}
+        seed = cfg.train.seed * 7919 + it
+        tasks = self.curriculum.edge_tasks(rule.window, seed)
+        if tasks is None:  # the range is whole
+            return {}
+        env_cfg = cfg.env.for_evaluation(None)
+        results = run_episodes(
+            deterministic(self.learner.policy),
+            lambda: make_env(cfg.character, cfg.task, env_cfg),
+            tasks,
+            cfg.actors.num_envs,
+            seed,
+        )
+        falls = sum(r.fell for r in results)
+        self.curriculum.judge_edge(len(results), falls)
+        return {
+            "edge_fall_percent": 100.0 * falls / len(results),
+            "edge_env_steps": sum(r.length for r in results),
+        }
 
     def update_motion(self, mean_return: float | None) -> dict:
         """[L21] §5.2-5.3: fit P_θ on the elites every `p_every` updates, advance the bootstrap

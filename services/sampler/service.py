@@ -180,6 +180,23 @@ class SamplerService:
             event = ("stage_changed", f"bootstrap stage {before} -> {stage}")
         self._commit(("core", "motion"), event=event)
 
+    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None:
+        """Tasks on the current range's edge for the learner's edge test (`WidenConfig`)."""
+        return self.curriculum.edge_tasks(n, seed)
+
+    def judge_edge(self, episodes: int, falls: int) -> float:
+        """The learner's edge test: `falls` of `episodes`; the range grows if it passed."""
+        before = self.curriculum.width
+        width = self.curriculum.judge_edge(episodes, falls)
+        event = None
+        if width != before:
+            event = (
+                "range_widened",
+                f"range widened to {100 * width:.0f}% ({falls} of {episodes} fell at its edge)",
+            )
+        self._commit(("core",), event=event)
+        return width
+
     def set_k(self, k: float) -> None:
         old = self.curriculum.sampler.k
         self.curriculum.set_k(k)
