@@ -173,7 +173,7 @@ def _stored_run(run_dir):
     return meta, n_history
 
 
-def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
+def test_one_command_run_with_api_control_stopped_by_sigterm(tmp_path):
     launch = Launch(tmp_path)
     try:
         url = launch.api_url()
@@ -229,8 +229,11 @@ def test_one_command_run_with_api_control_and_ctrl_c(tmp_path):
         assert run in status.stdout and "curriculum.mode" in status.stdout
         assert "uniform" in status.stdout
 
-        launch.proc.send_signal(signal.SIGINT)
+        # SIGTERM (what `kill`, `docker stop` and systemd send) stops as Ctrl-C does: the
+        # iteration finishes and is checkpointed (ray.init had put sys.exit in its place)
+        launch.proc.send_signal(signal.SIGTERM)
         assert launch.wait() == 0, launch.output()
+        assert "stopping after this iteration" in launch.output()
     finally:
         if launch.proc.poll() is None:
             launch.proc.kill()

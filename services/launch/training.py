@@ -211,6 +211,9 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
         console.print(f"Redis: embedded, {masked(redis_url)}, AOF in {server.data_dir}")
     if connect(opts.ray_address, opts.node_ip):
         services.callback(ray.shutdown)
+    # ray.init puts sys.exit on SIGTERM in the driver: a `kill` or `docker stop` then left in
+    # the middle of an iteration and the process aborted on its way out; it stops as Ctrl-C does
+    signal.signal(signal.SIGTERM, stop)
     run_id = run_id_for(run_dir, cfg, opts.resume)
     reporter = RunReporter(redis_url, run_id)
     try:
