@@ -44,7 +44,7 @@ gl:
 
 test: $(VENV)/.installed-test gl
 	$(BIN)/ruff check paramimic services tests benchmarks
-	$(BIN)/python -m pytest tests
+	$(BIN)/python -m pytest tests --durations=15
 
 # RLlib, the peer arm of benchmarks/throughput.py, in its own venv: ray[rllib] pins its own
 # gymnasium; torch pinned to the CPU build; this repo installed without its deps.

@@ -324,7 +324,7 @@ def variant_config(variant: str, seed: int) -> tuple[str, dict]:
 
 # what a result file keeps of each training iteration (metrics.jsonl)
 CURVE_KEYS = ("env_steps", "mean_return", "fall_percent", "mean_length", "std", "approx_kl",
-              "clip_fraction", "policy_lr", "range_width")  # fmt: skip
+              "clip_fraction", "policy_lr", "range_width", "edge_fall_percent")  # fmt: skip
 
 
 def _report_path(variant: str, seed: int, steps: int) -> Path:
