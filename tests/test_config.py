@@ -111,18 +111,26 @@ def test_shape_scale_shrinks_every_documented_range_toward_the_base_body(tmp_pat
     assert all(base.task[p.name] == (1.0, 1.0) for p in params)
 
 
-def test_the_quadruped_family_config_is_its_base_stage_widened():
-    """configs/quadruped_x0.5.yaml warm starts from configs/quadruped_base.yaml's run: the same
-    body, rules and PPO but for what the family stage adds (README "Families that learn")."""
+@pytest.mark.parametrize("character", ["quadruped", "biped"])
+def test_a_x05_family_config_is_its_base_stage_widened(character):
+    """configs/<character>_x0.5.yaml warm starts from configs/<character>_base.yaml's run: the
+    same body, rules and PPO but for what the family stage adds (README "Families that
+    learn"): retargeted legs, the small step, and for the biped a range grown from the base."""
     root = Path(__file__).parent.parent / "configs"
-    base = load_config(root / "quadruped_base.yaml").model_dump()
-    family = load_config(root / "quadruped_x0.5.yaml").model_dump()
+    base = load_config(root / f"{character}_base.yaml").model_dump()
+    family = load_config(root / f"{character}_x0.5.yaml").model_dump()
     assert (base["shape_scale"], family["shape_scale"]) == (0.0, 0.5)
     assert (base["env"]["retarget"], family["env"]["retarget"]) == (False, True)
     assert (base["ppo"]["desired_kl"], family["ppo"]["desired_kl"]) == (None, 0.01)
+    assert base["curriculum"]["widen"] is None
+    widen = family["curriculum"]["widen"]
+    if character == "biped":
+        assert (widen["start"], widen["step"], widen["promote_on"]) == (0.05, 0.05, "falls")
+    else:
+        assert widen is None
     for cfg in (base, family):
         del cfg["name"], cfg["task"], cfg["shape_scale"], cfg["env"]["retarget"]
-        del cfg["ppo"]["desired_kl"], cfg["train"]["total_steps"]
+        del cfg["ppo"]["desired_kl"], cfg["train"]["total_steps"], cfg["curriculum"]["widen"]
     assert base == family
 
 
