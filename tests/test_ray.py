@@ -49,6 +49,20 @@ def test_two_actors_deliver_fragments_and_training_advances(distributed, tmp_pat
     assert trainer.curriculum.summary()["episodes"] == episodes
 
 
+def test_the_learners_edge_test_widens_the_sampler_actors_range(distributed, tmp_path):
+    raw = _cfg().model_dump()
+    raw["env"]["max_episode_seconds"] = 0.3  # too short to fall: every edge test passes
+    raw["curriculum"]["widen"] = {"start": 0.3, "step": 0.2, "window": 4, "check_every": 1,
+                                  "promote_on": "edge", "promote_below": 0.2}  # fmt: skip
+    trainer, backend = distributed(ExperimentConfig.model_validate(raw), tmp_path)
+    rows = [trainer.iteration(backend) for _ in range(2)]
+    assert [(r["edge_fall_percent"], r["edge_env_steps"]) for r in rows] == [(0.0, 36)] * 2
+    assert [r["range_width"] for r in rows] == pytest.approx([0.5, 0.7])
+    # the width is the sampler actor's: the rollout actors' tasks come from its range
+    legs = trainer.curriculum.next_tasks(200)[:, 0]
+    assert np.all(np.abs(legs - 1.0) <= 0.7 * 0.2 + 1e-9) and np.ptp(legs) > 0.1
+
+
 def test_killed_actor_is_restarted_and_the_run_finishes(distributed, tmp_path):
     cfg = _cfg(steps_per_fragment=150)  # fragments long enough to be killed in the middle
     trainer, backend = distributed(cfg, tmp_path)
