@@ -283,12 +283,12 @@ class Trainer:
         if self.skill:
             metrics.update(self.update_motion(metrics.get("mean_return")))
         if cfg.curriculum.widen is not None:  # how much of the task range is in use
-            metrics.update(self.test_edge())
+            metrics.update(self.check_edge())
             metrics["range_width"] = self.curriculum.summary()["range_width"]
         self.bad_updates = self.bad_updates + 1 if metrics["skipped_steps"] else 0
         return metrics
 
-    def test_edge(self) -> dict:
+    def check_edge(self) -> dict:
         """`curriculum.widen.promote_on: edge`: every `check_every` iterations, the policy's
         mean action on `window` bodies at the range's edge, episodes of the evaluation's
         horizon; the curriculum widens the range when few fell. Its steps are not training
