@@ -288,7 +288,7 @@ BIPED_BASE = "biped_base_heading0.8_std0.1_floor"  # configs/biped_lower.yaml's 
 # the x0.5 rows: the variant that runs each config's recipe at x0.5 shape ranges
 # (variant, its budget in millions of env steps, the runs it warm starts from: variant, millions)
 X05 = {
-    "biped_lower": ("biped_x0.5_std0.1", 10, None),
+    "biped_lower": ("biped_x0.5_std0.1_floor_warm_widen_kl", 8, (BIPED_BASE, 2)),
     "quadruped": ("quadruped_x0.5_warm_stall_kl", 3, ("quadruped_base_stall", 2)),
 }
 WALKING = 0.8  # m/s, the x0.5 rows' speed bar: walker_legs' (its target 1.0 m/s, as theirs)
