@@ -648,6 +648,7 @@ CURVES = {
             "biped_x0.5_std0.1_floor_warm_kl",
             "biped_x0.5_std0.1_floor_warm_widen_kl",
             "biped_x0.5_std0.1_floor_warm_widen0.6_kl",
+            "biped_x0.5_std0.1_floor_warm_edge_kl",
         ),
         WIDTH_PANEL,
     ),
