@@ -465,6 +465,54 @@ def _on_bodies(policy, cfg, env_cfg, tasks: np.ndarray) -> dict:
     return summarize(results)
 
 
+RIM_BINS = ((0, 2), (3, 4), (5, 6), (7, 99))  # parameters beyond the range's width
+
+
+def rim(variant: str, seed: int) -> dict:
+    """Where a grown family's controller falls: the held-out evaluation of `run` (the same 300
+    bodies and seeds, so the same falls) split by how many shape parameters of a body lie
+    beyond the width the run's range reached (curriculum.widen; one width for all 27 of the
+    biped's, so nearly every held-out body has some). Writes
+    study_rim_<variant>_s<seed>_<M>M.json."""
+    warnings.filterwarnings("ignore")
+    from paramimic.config import ExperimentConfig
+    from paramimic.envs import make_env
+    from paramimic.evaluation import deterministic, run_episodes, summarize
+
+    state, _ = _run_state(variant, seed)
+    cfg = ExperimentConfig.model_validate(state["config"])
+    width = float(state["curriculum"]["core"]["width"])
+    env_cfg = cfg.env.for_evaluation(10.0)
+    space = make_env(cfg.character, cfg.task, env_cfg).task_space
+    tasks = space.sample(np.random.default_rng(EVAL_SEED), EVAL_EPISODES)
+    results = run_episodes(
+        deterministic(_adopted(state, cfg)), lambda: make_env(cfg.character, cfg.task, env_cfg),
+        tasks, 8, EVAL_SEED,
+    )  # fmt: skip
+    free = space.free
+    offset = np.abs(tasks - space.center)[:, free] / (0.5 * space.width[free])
+    beyond = (offset > width).sum(axis=1)
+    rets = np.array([r.ret for r in results])
+    worst = np.argsort(rets)[: len(rets) // 10]
+    groups = []
+    for lo, hi in RIM_BINS:
+        mask = (beyond >= lo) & (beyond <= hi)
+        chosen = [r for r, m in zip(results, mask, strict=True) if m]
+        row = {"beyond": [lo, hi], "bodies": int(mask.sum()),
+               "worst_decile_share": float(np.mean(mask[worst]))}  # fmt: skip
+        groups.append(row | (summarize(chosen) if chosen else {}))
+        print(f"{lo}-{hi} of {free.sum()} parameters beyond the range's {100 * width:.0f} %: "
+              f"{row['bodies']} bodies, falls {groups[-1].get('fall_percent', float('nan')):.1f} "
+              f"%, {100 * row['worst_decile_share']:.0f} % of the worst decile")  # fmt: skip
+    overall = summarize(results)
+    print(f"all: falls {overall['fall_percent']:.1f} % (the run's report: the same bodies)")
+    return _controller_report(
+        "rim", variant, seed, state, EVAL_EPISODES,
+        {"range_width": width, "all": overall, "groups": groups,
+         "parameters_beyond": beyond.tolist(), "fell": [r.fell for r in results]},
+    )  # fmt: skip
+
+
 def _controller_report(
     kind: str, variant: str, seed: int, state: dict, episodes: int, rows: dict
 ) -> dict:
@@ -830,6 +878,7 @@ def main() -> None:
             "reference",
             "headings",
             "stopped",
+            "rim",
         ],  # fmt: skip
     )
     ap.add_argument("variants", nargs="?", default="std_frozen_gamma99", help="comma-separated")
@@ -864,6 +913,8 @@ def main() -> None:
         fragility(args.variants, args.seed)
     elif args.command == "sensitivity":
         sensitivity(args.variants, args.seed)
+    elif args.command == "rim":
+        rim(args.variants, args.seed)
     elif args.command == "stopped":
         r = stopped(args.variants, args.seed)
         last = r["last_10_iterations"]
