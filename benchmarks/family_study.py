@@ -453,16 +453,23 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     return _controller_report("fragility", variant, seed, state, episodes, {"families": rows})
 
 
-def _on_bodies(policy, cfg, env_cfg, tasks: np.ndarray) -> dict:
-    """The deterministic controller, one episode per task of `cfg`'s env: `summarize`'s dict."""
+def _episodes_on(policy, cfg, env_cfg, tasks: np.ndarray) -> list:
+    """The deterministic controller, one episode per task of `cfg`'s env, as `run`'s
+    evaluation runs them (8 at a time, EVAL_SEED): EpisodeResults in the tasks' order."""
     from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, run_episodes, summarize
+    from paramimic.evaluation import deterministic, run_episodes
 
-    results = run_episodes(
+    return run_episodes(
         deterministic(policy), lambda: make_env(cfg.character, cfg.task, env_cfg), tasks, 8,
         EVAL_SEED,
     )  # fmt: skip
-    return summarize(results)
+
+
+def _on_bodies(policy, cfg, env_cfg, tasks: np.ndarray) -> dict:
+    """`_episodes_on`, summarized (`summarize`'s dict)."""
+    from paramimic.evaluation import summarize
+
+    return summarize(_episodes_on(policy, cfg, env_cfg, tasks))
 
 
 RIM_BINS = ((0, 2), (3, 4), (5, 6), (7, 99))  # parameters beyond the range's width
@@ -477,7 +484,7 @@ def rim(variant: str, seed: int) -> dict:
     warnings.filterwarnings("ignore")
     from paramimic.config import ExperimentConfig
     from paramimic.envs import make_env
-    from paramimic.evaluation import deterministic, run_episodes, summarize
+    from paramimic.evaluation import summarize
 
     state, _ = _run_state(variant, seed)
     cfg = ExperimentConfig.model_validate(state["config"])
@@ -485,10 +492,7 @@ def rim(variant: str, seed: int) -> dict:
     env_cfg = cfg.env.for_evaluation(10.0)
     space = make_env(cfg.character, cfg.task, env_cfg).task_space
     tasks = space.sample(np.random.default_rng(EVAL_SEED), EVAL_EPISODES)
-    results = run_episodes(
-        deterministic(_adopted(state, cfg)), lambda: make_env(cfg.character, cfg.task, env_cfg),
-        tasks, 8, EVAL_SEED,
-    )  # fmt: skip
+    results = _episodes_on(_adopted(state, cfg), cfg, env_cfg, tasks)
     free = space.free
     offset = np.abs(tasks - space.center)[:, free] / (0.5 * space.width[free])
     beyond = (offset > width).sum(axis=1)
