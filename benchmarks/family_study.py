@@ -505,9 +505,10 @@ def rim(variant: str, seed: int) -> dict:
         row = {"beyond": [lo, hi], "bodies": int(mask.sum()),
                "worst_decile_share": float(np.mean(mask[worst]))}  # fmt: skip
         groups.append(row | (summarize(chosen) if chosen else {}))
+        falls = f"{groups[-1]['fall_percent']:.1f} %" if chosen else "-"
         print(f"{lo}-{hi} of {free.sum()} parameters beyond the range's {100 * width:.0f} %: "
-              f"{row['bodies']} bodies, falls {groups[-1].get('fall_percent', float('nan')):.1f} "
-              f"%, {100 * row['worst_decile_share']:.0f} % of the worst decile")  # fmt: skip
+              f"{row['bodies']} bodies, falls {falls}, "
+              f"{100 * row['worst_decile_share']:.0f} % of the worst decile")  # fmt: skip
     overall = summarize(results)
     print(f"all: falls {overall['fall_percent']:.1f} % (the run's report: the same bodies)")
     return _controller_report(
@@ -517,11 +518,16 @@ def rim(variant: str, seed: int) -> dict:
     )  # fmt: skip
 
 
+# the reports of a run's controller measured elsewhere (study_<kind>_...), which `merge` skips
+CONTROLLER_KINDS = ("fragility", "rim", "sensitivity")
+
+
 def _controller_report(
     kind: str, variant: str, seed: int, state: dict, episodes: int, rows: dict
 ) -> dict:
     """benchmarks/results/study_<kind>_<variant>_s<seed>_<M>M.json (M: the checkpoint's env
     steps) of a run's controller measured on other bodies, `episodes` per body or family."""
+    assert kind in CONTROLLER_KINDS, kind
     steps = int(state["progress"]["env_steps"])
     report = {"variant": variant, "seed": seed, "config": variant_config(variant, seed)[0],
               "env_steps": steps, "episodes": episodes} | rows  # fmt: skip
@@ -613,7 +619,7 @@ def _spread(values: list[float]) -> dict:
 def merge() -> dict:
     groups: dict[tuple[str, float], list[dict]] = {}
     for path in sorted(RESULTS.glob("study_*_s*_*M.json")):
-        if path.name.startswith(("study_probe_", "study_fragility_", "study_sensitivity_")):
+        if path.name.startswith(tuple(f"study_{k}_" for k in ("probe", *CONTROLLER_KINDS))):
             continue  # evaluations of a run's controller elsewhere, not runs
         r = json.loads(path.read_text())
         millions = float(path.stem.rsplit("_", 1)[1].removesuffix("M"))  # the run's budget
