@@ -185,7 +185,10 @@ class EnvConfig(Section):
         "(paramimic/motion/retarget.py), so that bodies with legs of unequal length get a "
         "reference they can follow",
     )
-    target_velocity: float = Field(1.0, description="target speed when the task space has none")
+    target_velocity: float | None = Field(
+        None, description="target speed (m/s) when the task space has none; default: the "
+        "gait's own, 1.0 for a procedural gait, the clip's speed for a clip gait (env.gait)",
+    )  # fmt: skip
     target_direction: float = Field(
         0.0, description="target heading (rad) when the task space has none (3D characters)"
     )
@@ -210,6 +213,12 @@ class EnvConfig(Section):
         "turned away stops collecting the imitation terms (a training device like "
         "stall_speed_ratio; evaluation runs without it)",
     )  # fmt: skip
+    deviation_limit: float | None = Field(
+        None, gt=0, description="a clip gait's early termination: end the episode when a body "
+        "is farther than this (m) from its reference position (both relative to the root, in "
+        "the root's heading frame) or the root's height is; a training device like "
+        "stall_speed_ratio, reported as `deviated`, never a fall (evaluation runs without it)",
+    )  # fmt: skip
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
     observe_shape: bool = Field(
         True, description="false: the observation's shape parameters stay at the base body's "
@@ -220,6 +229,11 @@ class EnvConfig(Section):
     clip: str | None = Field(
         None, description="imitate this clip in continuous time ([L21]); None: [WL19] gaits"
     )
+    gait: str | None = Field(
+        None, description="a looping clip of the character (a name or a clip file) as the "
+        "[WL19] reference gait of ParamEnv: imitated cycle after cycle under the locomotion "
+        "task; None: the character's procedural gait",
+    )  # fmt: skip
     skill: SkillConfig = SkillConfig()
 
     @model_validator(mode="after")
@@ -246,7 +260,7 @@ class EnvConfig(Section):
     def for_evaluation(self, max_episode_seconds: float | None = None) -> EnvConfig:
         """This section as evaluation, rendering and play run it: whole episodes, without the
         training devices that end an episode early (stall_speed_ratio, heading_error_limit)."""
-        update = {"stall_speed_ratio": None, "heading_error_limit": None}
+        update = {"stall_speed_ratio": None, "heading_error_limit": None, "deviation_limit": None}
         if max_episode_seconds is not None:
             update["max_episode_seconds"] = max_episode_seconds
         return self.model_copy(update=update)
@@ -638,10 +652,32 @@ class ExperimentConfig(Section):
                     f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
                     + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
                 )
-        if clip is None and registration.gait is None:
+        gait = self.env.gait
+        if gait is not None:
+            if clip is not None:
+                raise ValueError(
+                    "env.gait and env.clip: a clip is either the [WL19] reference gait "
+                    "(env.gait, ParamEnv) or an [L21] skill (env.clip, SkillEnv), not both"
+                )
+            try:
+                loaded = registration.load_clip(gait)
+            except (ValueError, KeyError) as e:
+                raise ValueError(f"env.gait: {e}") from None
+            if loaded.loop != "wrap":
+                raise ValueError(
+                    f"env.gait: clip {gait!r} does not loop (Loop {loaded.loop!r}); a [WL19] "
+                    "reference gait must be cyclic; imitate it as a skill with env.clip"
+                )
+            if character.planar:
+                raise ValueError(f"env.gait: clip gaits need a free root; {self.character!r} is planar")
+            if gait not in registration.clips:
+                object.__setattr__(self.env, "gait", str(Path(gait).expanduser().resolve()))
+        if self.env.deviation_limit is not None and gait is None:
+            raise ValueError("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
+        if clip is None and gait is None and registration.gait is None:
             raise ValueError(
-                f"character {self.character!r} has no [WL19] gait; set env.clip "
-                f"(one of {sorted(registration.clips)})"
+                f"character {self.character!r} has no procedural [WL19] gait; set env.gait "
+                f"(a looping clip) or env.clip (one of {sorted(registration.clips)})"
             )
         if "target_direction" in self.task and character.planar:
             raise ValueError(

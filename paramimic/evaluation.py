@@ -2,7 +2,11 @@
 
 Fall-down % within the horizon, task achievement (mean cumulative task reward), mean return,
 per-parameter returns over a grid of two task dimensions, and uniformity: min/mean and the
-coefficient of variation of the per-parameter returns.
+coefficient of variation of the per-parameter returns. On a clip gait (`env.gait`) also the
+imitation measures: the body position error (every body against its reference, each relative
+to its own root in its own heading frame, averaged over bodies and control steps, m), the root
+drift (the root's mean horizontal distance from the reference root path, m) and the forward
+speed against the clip's.
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ class EpisodeResult:
     distance: float  # root x travelled (m)
     seconds: float
     fitness: float | None = None  # [L21] Eq. 10 of a skill episode (0 unless completed)
+    body_error: float | None = None  # clip gaits: mean body position error (m)
+    root_drift: float | None = None  # clip gaits: mean distance from the reference root path
+    clip_speed: float | None = None  # clip gaits: the clip's speed on this body (m/s)
 
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
@@ -57,6 +64,7 @@ def run_episodes(
         o, _ = envs[j].reset(seed=int(rng.integers(2**31 - 1)), options={"task": tasks[k]})
         obs[j] = o
         slots[j] = {"k": k, "ret": 0.0, "task": 0.0, "len": 0, "x0": float(envs[j].data.qpos[0])}
+        slots[j] |= {"error": 0.0, "drift": 0.0}
 
     for j in range(len(envs)):
         start(j)
@@ -71,6 +79,10 @@ def run_episodes(
             s["ret"] += r
             s["task"] += info["reward_terms"]["task"]
             s["len"] += 1
+            tracks = getattr(env, "clip_speed", None) is not None
+            if tracks and not info["diverged"]:
+                s["error"] += env.body_error()[0]
+                s["drift"] += env.root_drift()
             if te or tr:
                 results[s["k"]] = EpisodeResult(
                     tasks[s["k"]],
@@ -81,6 +93,9 @@ def run_episodes(
                     float(env.data.qpos[0]) - s["x0"],
                     s["len"] * env.dt,
                     info["skill"]["fitness"] if "skill" in info else None,
+                    s["error"] / s["len"] if tracks else None,
+                    s["drift"] / s["len"] if tracks else None,
+                    env.clip_speed if tracks else None,
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -109,12 +124,25 @@ def summarize(results: list[EpisodeResult]) -> dict:
         "mean_length_seconds": float(np.mean([r.seconds for r in results])),
         "mean_forward_speed": float(speeds.mean()),
         "uniformity": uniformity(rets),
-    } | _fitness(results)
+    } | _fitness(results) | _tracking(results, speeds)
 
 
 def _fitness(results: list[EpisodeResult]) -> dict:
     f = [r.fitness for r in results if r.fitness is not None]
     return {"mean_fitness": float(np.mean(f))} if f else {}
+
+
+def _tracking(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
+    """The clip-gait measures over episodes (each episode's per-step mean, then the mean)."""
+    if not results or results[0].body_error is None:
+        return {}
+    clip = np.array([r.clip_speed for r in results])
+    return {
+        "mean_body_error": float(np.mean([r.body_error for r in results])),
+        "mean_root_drift": float(np.mean([r.root_drift for r in results])),
+        "clip_speed": float(clip.mean()),
+        "speed_ratio": float(np.mean(speeds / clip)),
+    }
 
 
 def evaluate(

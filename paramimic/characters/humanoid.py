@@ -280,4 +280,12 @@ HUMANOID_REGISTRATION = Registration(
     clips={f"humanoid_{name}": partial(humanoid_clip, name) for name in CLIPS},
     clip_file=load_deepmimic,  # a user's humanoid3d clip in DeepMimic's format
     reward_weights=(4.0, 1.0, 2.0, 1.0, 2.0, 1.0),  # [WL19] Table 3, biped (full)
+    # the looping clips as [WL19] reference gaits (ParamEnv), as configs/humanoid_walk.yaml
+    # sets them: paramimic/HumanoidWalkGait-v0 and paramimic/HumanoidRunGait-v0
+    envs={
+        f"Humanoid{name.capitalize()}Gait": {
+            "config": {"gait": f"humanoid_{name}", "physics_hz": 300, "deviation_limit": 0.5}
+        }
+        for name in ("walk", "run")
+    },
 )

@@ -19,6 +19,7 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.characters.legs import leg_chains
@@ -34,6 +35,7 @@ from paramimic.envs.rewards import (
     wl19_task_share,
     wl19_weights,
 )
+from paramimic.motion.clip_gait import ClipGait
 from paramimic.motion.retarget import RetargetedGait
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
@@ -48,10 +50,19 @@ class ParamEnv(EnvCore):
     def _setup(self) -> None:
         self._velocity_idx = self.goal_index("target_velocity")
         self._direction_idx = self.goal_index("target_direction")
+        self._clip = None  # a clip gait's clip (env.gait), tabulated per body in `_bind`
+        self._clip_gaits: dict[tuple, ClipGait] = {}
         gait = self.registration.gait
+        if self.config.gait is not None:
+            if self.definition.planar:
+                raise ValueError(f"env.gait: clip gaits need a free root; {self.definition.name!r}")
+            self._clip = self.registration.load_clip(self.config.gait)
+            gait = self._clip_gait(self._base)
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
         self._gait = self.motion = gait if self.config.imitation else None
+        # the speed the gait moves at on the base body: the target when none is given
+        self._gait_speed = gait.speed if isinstance(gait, ClipGait) else 1.0
         self._action_scale = self.config.action_scale
         self._min_up = math.cos(self.config.max_pitch)  # the root's z axis may tilt this far
         self._free = not self.definition.planar
@@ -110,7 +121,22 @@ class ParamEnv(EnvCore):
         if self.motion is not None and self.config.retarget:
             legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
             self.motion = RetargetedGait(self._gait, legs)
+        if self._clip is not None:
+            self._gait = self._clip_gait(body)
+            self.motion = self._gait if self.config.imitation else None
+            self._index_fall_geoms()
         self._reference = self._tabulate_reference() if self.motion is not None else None
+
+    def _clip_gait(self, body: Body) -> ClipGait:
+        """The clip gait on `body` (its root path scaled by the body's hip height), cached."""
+        key = tuple(sorted(body.shape.items()))
+        gait = self._clip_gaits.get(key)
+        if gait is None:
+            joints = tuple(j.name for j in self.definition.joints)
+            to_qpos = lambda pose: self.definition.pose_qpos(body, pose)  # noqa: E731
+            gait = ClipGait.from_clip(self._clip, joints, to_qpos, body.qpos_idx)
+            self._clip_gaits[key] = gait
+        return gait
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
@@ -133,7 +159,56 @@ class ParamEnv(EnvCore):
         velocities = self.motion.velocity(phis)
         torques = np.zeros_like(poses)
         table = np.concatenate([poses, velocities, ee.reshape(len(phis), -1), torques], axis=1)
+        if isinstance(self.motion, ClipGait):
+            self._bodies = self._tabulate_bodies(phis)
         return list(table), list(np.diff(table, axis=0))
+
+    def _tabulate_bodies(self, phis: np.ndarray) -> tuple[list, list]:
+        """A clip gait's reference root height and body positions relative to the root, in the
+        root's heading frame (the body position error's reference): rows [1 + 3B] at φ = k/K,
+        and their differences, as `_tabulate_reference`'s table."""
+        c, d, m = self.character, self.data, self.model
+        out = np.empty((len(phis), 1 + 3 * (m.nbody - 2)))
+        for k, phi in enumerate(phis):
+            d.qpos[:] = m.qpos0
+            d.qpos[:7] = self.motion.root_qpos(float(phi))
+            d.qpos[c.qpos_idx] = self.motion.pose(float(phi))
+            mujoco.mj_kinematics(m, d)
+            out[k, 0] = d.qpos[2]
+            out[k, 1:] = self._bodies_in_heading_frame().ravel()
+        return list(out), list(np.diff(out, axis=0))
+
+    def _bodies_reference(self) -> np.ndarray:
+        x = (self._phase % 1.0) * REFERENCE_SAMPLES
+        k = int(x)
+        rows, slopes = self._bodies
+        return rows[k] + (x - k) * slopes[k]
+
+    def _bodies_in_heading_frame(self) -> np.ndarray:
+        """Every body but the root [B, 3] relative to the root, in its heading frame (yaw
+        removed), for the current kinematics."""
+        d, root = self.data, self.character.root_body_id
+        fx, fy = self._facing()
+        rel = d.xpos[root + 1 :] - d.xpos[root]
+        x, y = rel[:, 0] * fx + rel[:, 1] * fy, rel[:, 1] * fx - rel[:, 0] * fy
+        return np.column_stack([x, y, rel[:, 2]])
+
+    def body_error(self) -> tuple[float, float]:
+        """A clip gait's (mean, max) distance (m) between the bodies' simulated and reference
+        positions, each relative to its own root in its own heading frame, at this phase."""
+        ref = self._bodies_reference()[1:].reshape(-1, 3)
+        err = np.linalg.norm(self._bodies_in_heading_frame() - ref, axis=1)
+        return float(err.mean()), float(err.max())
+
+    def root_drift(self) -> float:
+        """A clip gait's horizontal distance (m) between the root and the reference root path:
+        the clip's root from the episode's start, advancing cycle by cycle along the target."""
+        g = self._gait
+        path = g.root_path(self._phase) - g.root_path(self._phase0)
+        hx, hy = self._heading
+        ref_x = self._origin[0] + hx * path[0] - hy * path[1]
+        ref_y = self._origin[1] + hy * path[0] + hx * path[1]
+        return math.hypot(self.data.qpos[0] - ref_x, self.data.qpos[1] - ref_y)
 
     def _reference_at(self, phase: float) -> np.ndarray:
         """Linear interpolation in the tabulated reference: [pose, joint velocity, ee, 0]."""
@@ -169,6 +244,8 @@ class ParamEnv(EnvCore):
         d.qvel[0] = self._target_vel[0]  # root velocity along the target
         if self._free:
             d.qvel[1] = self._target_vel[1]
+        if isinstance(self._gait, ClipGait):  # the clip's root state too, facing the target
+            self._root_state(phase)
         if len(c.contact_site_ids):
             d.qpos[:] = self.ground_posture(d.qpos.copy())
             d.qpos[self._height_adr] += 1e-3
@@ -180,7 +257,20 @@ class ParamEnv(EnvCore):
         self._watch_stability()
         self._com = [tuple(d.sensordata[c.com_sensor].tolist())] * (self._window + 1)
         self._com_vel = (0.0, 0.0, 0.0)
+        self._phase0 = phase
+        self._origin = (float(d.qpos[0]), float(d.qpos[1]))
         self._look_ahead()
+
+    def _root_state(self, phase: float) -> None:
+        """Reference state initialisation of a clip gait's free root: the clip's orientation
+        (its travel turned onto the target direction) and its linear and angular velocity."""
+        d, g = self.data, self._gait
+        hx, hy = self._heading
+        turn = Rotation.from_euler("z", math.atan2(hy, hx))
+        d.qpos[3:7] = (turn * g.root_rotation(phase)).as_quat(scalar_first=True)
+        linear, angular = g.root_velocity(phase)
+        d.qvel[0:3] = turn.apply(linear)
+        d.qvel[3:6] = angular
 
     def root_height(self) -> float:
         """The root's height above the ground (m)."""
@@ -209,6 +299,8 @@ class ParamEnv(EnvCore):
             if self._velocity_idx is not None
             else self.config.target_velocity
         )
+        if base_v is None:  # the gait's own speed
+            base_v = self._gait_speed
         self._target_v = self._scales.velocity * base_v
         heading = (
             float(self._task[self._direction_idx])
@@ -219,6 +311,7 @@ class ParamEnv(EnvCore):
         sign = 1.0 if self._target_v >= 0 else -1.0
         self._target_dir = (sign * math.cos(heading), sign * math.sin(heading))
         self._target_vel = (self._target_v * math.cos(heading), self._target_v * math.sin(heading))
+        self._heading = (math.cos(heading), math.sin(heading))  # where a clip gait faces
 
     def set_goal(self, name: str, value: float) -> np.ndarray:
         """Change a goal of the task mid-episode (target_velocity, target_direction): the targets
@@ -266,23 +359,40 @@ class ParamEnv(EnvCore):
         self._look_ahead()
         obs = self._observe()
         self._last_obs = obs
-        tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
-        fell = not self.definition.swims and bool(self.root_height() < self._fall_height or tilted)
+        if self._clip is not None:  # DeepMimic's rule: root, chest or neck on the ground
+            fell = self.fall_contact()
+        else:
+            tilted = d.sensordata[c.up_sensor.start + 2] < self._min_up
+            fell = not self.definition.swims and bool(
+                self.root_height() < self._fall_height or tilted
+            )
         stalled = not fell and self._stalled()
         off_course = not (fell or stalled) and self._off_course()
-        ended = fell or stalled or off_course
+        deviated = not (fell or stalled or off_course) and self._deviated()
+        ended = fell or stalled or off_course or deviated
         truncated = self._steps >= self._max_steps and not ended
         info = {
             "task": self._task.copy(),
             "fell": fell,
             "stalled": stalled,
             "off_course": off_course,
+            "deviated": deviated,
             "diverged": False,
             "dphi": 1.0,
             "reward_spike": 0.0,
             "reward_terms": terms,
         }
         return obs, reward, ended, truncated, info
+
+    def _deviated(self) -> bool:
+        """`deviation_limit`: a body (relative to the root, in its heading frame) or the root's
+        height is farther than that from the clip gait's reference."""
+        limit = self.config.deviation_limit
+        if limit is None or self._clip is None:
+            return False
+        _, worst = self.body_error()
+        height = abs(self.data.qpos[2] - self._bodies_reference()[0])
+        return worst > limit or height > limit
 
     def _stalled(self) -> bool:
         """`stall_speed_ratio`: after a full velocity window, the average COM velocity along the
@@ -338,6 +448,7 @@ class ParamEnv(EnvCore):
             "fell": False,
             "stalled": False,
             "off_course": False,
+            "deviated": False,
             "diverged": True,
             "dphi": 1.0,
             "reward_spike": 0.0,
@@ -446,6 +557,12 @@ class ParamEnv(EnvCore):
             layout += [("phase_sin_cos", 2), ("reference_pose_next", nj)]
             layout += [(f"reference_pose_{ahead:g}s", nj) for ahead in FUTURE_POSES]
         return [(name, size) for name, size in layout if size > 0]  # no task: no task segment
+
+    @property
+    def clip_speed(self) -> float | None:
+        """A clip gait's speed on this body (m/s; the clip's root path scaled by the body's hip
+        height); None for a procedural gait."""
+        return self._gait.speed if self._clip is not None else None
 
     @property
     def sim_time(self) -> float:
