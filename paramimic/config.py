@@ -669,7 +669,9 @@ class ExperimentConfig(Section):
                     "reference gait must be cyclic; imitate it as a skill with env.clip"
                 )
             if character.planar:
-                raise ValueError(f"env.gait: clip gaits need a free root; {self.character!r} is planar")
+                raise ValueError(
+                    f"env.gait: clip gaits need a free root; {self.character!r} is planar"
+                )
             if gait not in registration.clips:
                 object.__setattr__(self.env, "gait", str(Path(gait).expanduser().resolve()))
         if self.env.deviation_limit is not None and gait is None:

@@ -115,16 +115,20 @@ def summarize(results: list[EpisodeResult]) -> dict:
     rets = np.array([r.ret for r in results])
     speeds = np.array([r.distance / r.seconds for r in results])
     decile = np.sort(rets)[: max(1, len(rets) // 10)]
-    return {
-        "episodes": len(results),
-        "mean_return": float(rets.mean()),
-        "worst_decile_return": float(decile.mean()),
-        "task_achievement": float(np.mean([r.task_return for r in results])),
-        "fall_percent": 100.0 * float(np.mean([r.fell for r in results])),
-        "mean_length_seconds": float(np.mean([r.seconds for r in results])),
-        "mean_forward_speed": float(speeds.mean()),
-        "uniformity": uniformity(rets),
-    } | _fitness(results) | _tracking(results, speeds)
+    return (
+        {
+            "episodes": len(results),
+            "mean_return": float(rets.mean()),
+            "worst_decile_return": float(decile.mean()),
+            "task_achievement": float(np.mean([r.task_return for r in results])),
+            "fall_percent": 100.0 * float(np.mean([r.fell for r in results])),
+            "mean_length_seconds": float(np.mean([r.seconds for r in results])),
+            "mean_forward_speed": float(speeds.mean()),
+            "uniformity": uniformity(rets),
+        }
+        | _fitness(results)
+        | _tracking(results, speeds)
+    )
 
 
 def _fitness(results: list[EpisodeResult]) -> dict:

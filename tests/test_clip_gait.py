@@ -184,7 +184,9 @@ def test_evaluation_reports_the_imitation_measures():
     )
     report = summarize(results)
     clip = humanoid_clip("walk")
-    speed = float(np.hypot(*(clip.root_position[-1, :2] - clip.root_position[0, :2]))) / clip.duration
+    speed = (
+        float(np.hypot(*(clip.root_position[-1, :2] - clip.root_position[0, :2]))) / clip.duration
+    )
     assert report["clip_speed"] == pytest.approx(speed, rel=1e-6)
     assert 0 < report["mean_body_error"] < 0.5
     assert report["mean_root_drift"] >= 0
