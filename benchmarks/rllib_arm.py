@@ -4,12 +4,14 @@ RLlib wants its own gymnasium pin, so this runs in its own venv (`make rllib-ven
 `.venv-rllib` with `ray[rllib]` and torch==2.13.0, and this repo installed without deps);
 throughput.py calls it as a subprocess between its own arms, so the ratio comes from one run
 of the machine. RLlib's new API stack: 2 env runners x 8 envs (like our 2 actors x 16 envs,
-one CPU each), one local learner, the same PPO batch, minibatch, epochs and 3x128 network.
+one CPU each), one local learner, the config's PPO batch, minibatch, epochs, network (ReLU, as
+ours), γ, λ and policy learning rate.
 
     .venv-rllib/bin/python benchmarks/rllib_arm.py --config configs/walker_legs.yaml --iterations 4
 
-The env is the character's gymnasium id (`paramimic/Walker-v0`) made with the config's task and
-env sections, shapes drawn uniformly (RLlib has no curriculum; ours runs its own).
+The env is the character's gymnasium id (`paramimic/Walker-v0`; a clip gait's own id, such as
+`paramimic/HumanoidWalkGait-v0`) made with the config's task and env sections, shapes drawn
+uniformly (RLlib has no curriculum; ours runs its own).
 """
 
 from __future__ import annotations
@@ -27,9 +29,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", default="configs/walker_base.yaml")
     ap.add_argument("--iterations", type=int, default=4)
-    ap.add_argument("--batch", type=int, default=4096)
-    ap.add_argument("--minibatch", type=int, default=512)
-    ap.add_argument("--epochs", type=int, default=10)
+    ap.add_argument("--batch", type=int, help="default: the config's ppo.num_steps")
+    ap.add_argument("--minibatch", type=int, help="default: the config's ppo.minibatch_size")
+    ap.add_argument("--epochs", type=int, help="default: the config's ppo.num_epochs")
     args = ap.parse_args()
 
     import ray
@@ -41,9 +43,15 @@ def main() -> None:
     from paramimic.envs import registered_envs
 
     cfg = load_config(args.config)
-    env_id = next(  # the character's plain (gait) id; the config's task replaces its task
-        k for k, v in registered_envs().items() if v["character"] == cfg.character
-    )
+    p = cfg.ppo
+    args.batch = args.batch or p.num_steps
+    args.minibatch = args.minibatch or p.minibatch_size
+    args.epochs = args.epochs or p.num_epochs
+    # the character's plain (gait) id, or the clip gait's; the config's task and env replace
+    # the id's own
+    ids = [k for k, v in registered_envs().items() if v["character"] == cfg.character]
+    gait = [k for k in ids if registered_envs()[k].get("config", {}).get("gait") == cfg.env.gait]
+    env_id = (gait or ids)[0]
     task, env_config = cfg.task, cfg.env.model_dump()
 
     def make(_ctx):
@@ -69,13 +77,13 @@ def main() -> None:
             train_batch_size_per_learner=args.batch,
             minibatch_size=args.minibatch,
             num_epochs=args.epochs,
-            gamma=0.95,
-            lambda_=0.95,
-            lr=2e-4,
+            gamma=p.gamma,
+            lambda_=p.gae_lambda,
+            lr=p.policy_lr,
         )
         .rl_module(
             model_config=DefaultModelConfig(
-                fcnet_hiddens=[128, 128, 128], fcnet_activation="relu", vf_share_layers=False
+                fcnet_hiddens=list(p.hidden_sizes), fcnet_activation="relu", vf_share_layers=False
             )
         )
     )
@@ -104,6 +112,7 @@ def main() -> None:
                 "batch": args.batch,
                 "minibatch": args.minibatch,
                 "epochs": args.epochs,
+                "hidden_sizes": list(p.hidden_sizes),
                 "ray": ray.__version__,
             }
         )

@@ -9,9 +9,10 @@
     defaults and with our n_steps / minibatch / epochs;
 (g) RLlib PPO on the same gymnasium env (benchmarks/rllib_arm.py in its own venv,
     `make rllib-venv`; skipped with a note when that venv is missing).
-(e) and (g) run for every config of --peer-configs (default walker_base and walker_legs, whose
-resets, shapes and curriculum are included), so the default mode's ratio to RLlib is measured
-side by side in one run.
+(e) and (g) run for every config of --peer-configs (default walker_base, walker_legs and
+humanoid_walk, whose resets, shapes and curriculum are included), so the default mode's ratio to
+RLlib is measured side by side in one run; beside each, (a) for that config's body at 600 Hz, so
+that training's rate is also a ratio to the raw single-core physics at [WL19]'s rate.
 Also the peak RSS of an actor and of the learner. Writes benchmarks/results/throughput.json
 and prints a table.
 
@@ -168,7 +169,10 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--sb3-steps", type=int, default=3 * 8192)
-    ap.add_argument("--peer-configs", default="configs/walker_base.yaml,configs/walker_legs.yaml")
+    ap.add_argument(
+        "--peer-configs",
+        default="configs/walker_base.yaml,configs/walker_legs.yaml,configs/humanoid_walk.yaml",
+    )
     ap.add_argument("--rllib-python", type=Path, default=ROOT / ".venv-rllib/bin/python")
     ap.add_argument("--rllib-iterations", type=int, default=4)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/throughput.json")
@@ -193,12 +197,17 @@ def main() -> None:
             for path in args.peer_configs.split(","):
                 pc = load_config(ROOT / path, {"actors.num_actors": 2})
                 default = pc.actors.mode
-                peers[path] = {
-                    f"ours_{mode}": training_steps_per_s(
-                        pc, url, mode, args.iterations, Path(path).stem
-                    )
-                    for mode in ("sync", "pipelined")
-                } | {"default_mode": default}
+                at600 = load_config(ROOT / path, {"env.physics_hz": 600, "env.frame_skip": None})
+                peers[path] = (
+                    {"raw_mj_step_600hz": {"steps_per_s": raw_steps_per_s(at600)}}
+                    | {
+                        f"ours_{mode}": training_steps_per_s(
+                            pc, url, mode, args.iterations, Path(path).stem
+                        )
+                        for mode in ("sync", "pipelined")
+                    }
+                    | {"default_mode": default}
+                )
     finally:
         ray.shutdown()
     for path, peer in peers.items():  # our Ray is down: RLlib starts its own
@@ -209,6 +218,10 @@ def main() -> None:
                 peer[f"ours_{peer['default_mode']}"]["steps_per_s"] / r
             )
             peer["pipelined_over_rllib"] = peer["ours_pipelined"]["steps_per_s"] / r
+        peer["default_over_raw_600hz (humanoid target >= 1.35)"] = (
+            peer[f"ours_{peer['default_mode']}"]["steps_per_s"]
+            / peer["raw_mj_step_600hz"]["steps_per_s"]
+        )
     rows["learner_peak_rss_mb"] = {
         "value": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     }

@@ -219,6 +219,15 @@ class EnvConfig(Section):
         "the root's heading frame) or the root's height is; a training device like "
         "stall_speed_ratio, reported as `deviated`, never a fall (evaluation runs without it)",
     )  # fmt: skip
+    phase_sampling: Literal["uniform", "failures"] = Field(
+        "uniform", description="where reference state initialisation starts a cycle: uniform "
+        "phases ([WL19] Alg. 1), or phases drawn where episodes fail "
+        "(paramimic/motion/phase.py; evaluation always draws uniform phases)",
+    )  # fmt: skip
+    phase_bins: int = Field(10, ge=1, description="phase_sampling failures: bins per cycle")
+    phase_alpha: float = Field(
+        0.02, gt=0, le=1, description="phase_sampling failures: EMA rate per episode and bin"
+    )
     init_noise: float = Field(0.05, ge=0, description="noise on the initial reference state")
     observe_shape: bool = Field(
         True, description="false: the observation's shape parameters stay at the base body's "
@@ -259,8 +268,10 @@ class EnvConfig(Section):
 
     def for_evaluation(self, max_episode_seconds: float | None = None) -> EnvConfig:
         """This section as evaluation, rendering and play run it: whole episodes, without the
-        training devices that end an episode early (stall_speed_ratio, heading_error_limit)."""
+        training devices that end an episode early (stall_speed_ratio, heading_error_limit,
+        deviation_limit), starting at uniform phases."""
         update = {"stall_speed_ratio": None, "heading_error_limit": None, "deviation_limit": None}
+        update["phase_sampling"] = "uniform"
         if max_episode_seconds is not None:
             update["max_episode_seconds"] = max_episode_seconds
         return self.model_copy(update=update)

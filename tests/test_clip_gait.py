@@ -221,3 +221,35 @@ def test_the_walk_gait_is_a_gymnasium_env():
     assert env.unwrapped.config.physics_hz == 300
     obs, *_ = env.step(env.action_space.sample())
     assert obs.shape == env.observation_space.shape
+
+
+def test_phase_sampling_follows_the_failures_with_a_uniform_floor():
+    from paramimic.motion.phase import PhaseSampler
+
+    s = PhaseSampler(bins=4, alpha=0.5, uniform=0.2)
+    assert s.probabilities() == pytest.approx([0.25] * 4)  # nothing failed yet
+    s.update(0.3, failed=True)  # bin 1: EMA 0 -> 0.5
+    s.update(0.6, failed=False)  # bin 2 stays 0
+    # smoothed over the circle: [0.125, 0.25, 0.125, 0] / 0.5, times 0.8, plus 0.05 each
+    assert s.probabilities() == pytest.approx([0.25, 0.45, 0.25, 0.05])
+    s.update(1.3, failed=False)  # bin 1 again (the cycle wraps): 0.5 -> 0.25
+    assert s.failure == pytest.approx([0.0, 0.25, 0.0, 0.0])
+    rng = np.random.default_rng(0)
+    draws = np.array([s.sample(rng) for _ in range(4000)])
+    counts = np.bincount((draws * 4).astype(int), minlength=4) / len(draws)
+    assert counts == pytest.approx([0.25, 0.45, 0.25, 0.05], abs=0.03)
+
+
+def test_a_clip_gait_env_learns_where_its_episodes_fail():
+    env = make_env("humanoid", {}, GAIT | {"phase_sampling": "failures", "phase_bins": 5})
+    env.reset(seed=0)
+    start = env._phase0
+    while True:  # zero actions: the humanoid falls within seconds
+        *_, term, trunc, info = env.step(np.zeros(env.action_space.shape))
+        if term or trunc:
+            break
+    assert info["fell"] or info["deviated"] or trunc
+    failed = info["fell"] or info["deviated"]
+    b = int(start * 5)
+    assert env._phases.failure[b] == pytest.approx(0.02 * failed)
+    assert make_env("humanoid", {}, env.config.for_evaluation())._phases is None

@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.characters.legs import leg_chains
+from paramimic.motion.phase import PhaseSampler
 from paramimic.envs.core import EnvCore
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.envs.rewards import (
@@ -61,6 +62,12 @@ class ParamEnv(EnvCore):
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
         self._gait = self.motion = gait if self.config.imitation else None
+        cfg = self.config
+        self._phases = (  # start phases where episodes fail, or uniform
+            PhaseSampler(cfg.phase_bins, cfg.phase_alpha)
+            if cfg.phase_sampling == "failures" and gait is not None
+            else None
+        )
         # the speed the gait moves at on the base body: the target when none is given
         self._gait_speed = gait.speed if isinstance(gait, ClipGait) else 1.0
         self._action_scale = self.config.action_scale
@@ -223,7 +230,9 @@ class ParamEnv(EnvCore):
         super().reset(seed=seed)
         self._task = self.task_from_options(options)
         self._load(self._task)
-        self._init_state(self.np_random, phase=float(self.np_random.random()))
+        rng = self.np_random
+        phase = self._phases.sample(rng) if self._phases is not None else float(rng.random())
+        self._init_state(rng, phase=phase)
         obs = self._observe()
         self._last_obs = obs
         return obs, {"task": self._task.copy()}
@@ -371,6 +380,8 @@ class ParamEnv(EnvCore):
         deviated = not (fell or stalled or off_course) and self._deviated()
         ended = fell or stalled or off_course or deviated
         truncated = self._steps >= self._max_steps and not ended
+        if self._phases is not None and (ended or truncated):
+            self._phases.update(self._phase0, failed=fell or deviated)
         info = {
             "task": self._task.copy(),
             "fell": fell,

@@ -66,6 +66,8 @@ class EpisodeSummary:
     ended_early: bool
     # [L21] episodes: achieved a', fitness F, trace, and the deal's batch/region/motion version
     skill: dict = field(default_factory=dict)
+    # a clip gait's episode ended by the training rule `env.deviation_limit` (never a fall)
+    deviated: bool = False
 
     def to_dict(self) -> dict:
         out = {
@@ -77,6 +79,7 @@ class EpisodeSummary:
             "diverged": self.diverged,
             "reward_terms": self.reward_terms,
             "ended_early": self.ended_early,
+            "deviated": self.deviated,
         }
         for k, v in self.skill.items():
             out[k] = v.tolist() if isinstance(v, np.ndarray) else v
@@ -315,6 +318,7 @@ def _summary(ep: dict, info: dict, terminated: bool) -> EpisodeSummary:
         reward_terms=ep["terms"],
         ended_early=terminated,
         skill=_skill_fields(info, ep["tags"]),
+        deviated=bool(info.get("deviated", False)),
     )
 
 

@@ -439,4 +439,5 @@ def episode_metrics(episodes: list[EpisodeSummary]) -> dict:
         "mean_length": float(np.mean([e.length for e in episodes])),
         "fall_percent": 100.0 * float(np.mean([e.fell for e in episodes])),
         "diverged": int(sum(e.diverged for e in episodes)),
+        "deviated_percent": 100.0 * float(np.mean([e.deviated for e in episodes])),
     }
