@@ -23,7 +23,6 @@ from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.characters.legs import leg_chains
-from paramimic.motion.phase import PhaseSampler
 from paramimic.envs.core import EnvCore
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.envs.rewards import (
@@ -37,6 +36,7 @@ from paramimic.envs.rewards import (
     wl19_weights,
 )
 from paramimic.motion.clip_gait import ClipGait
+from paramimic.motion.phase import PhaseSampler
 from paramimic.motion.retarget import RetargetedGait
 
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
