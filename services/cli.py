@@ -258,6 +258,9 @@ def evaluate_cmd(
         "fall_percent",
         "mean_forward_speed",
         "mean_fitness",  # [L21] skill runs
+        "mean_body_error",  # clip gaits (env.gait)
+        "mean_root_drift",
+        "speed_ratio",
     )
     shown = {k: round(report[k], 3) for k in keys if k in report}
     console.print(shown | {"uniformity": report["uniformity"]})

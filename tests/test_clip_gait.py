@@ -253,3 +253,19 @@ def test_a_clip_gait_env_learns_where_its_episodes_fail():
     b = int(start * 5)
     assert env._phases.failure[b] == pytest.approx(0.02 * failed)
     assert make_env("humanoid", {}, env.config.for_evaluation())._phases is None
+
+
+def test_a_clip_gait_family_changes_shape_on_the_fly():
+    """[WL19] §5.2 on the humanoid's clip gait: a longer-legged body gets its own gait table (the
+    clip's root path scaled by its hip height) and keeps walking from the same phase."""
+    env = make_env("humanoid", {"leg_length": (0.8, 1.2)}, GAIT)
+    env.reset(seed=0, options={"task": {"leg_length": 1.0}})
+    base_speed = env.clip_speed
+    env.step(np.zeros(env.action_space.shape))
+    phase = env._phase
+    obs = env.set_shape({"leg_length": 1.2})
+    assert env._phase == phase and obs.shape == env.observation_space.shape
+    ratio = env.character.hip_height / env._base.hip_height
+    assert env.clip_speed == pytest.approx(base_speed * ratio)
+    *_, info = env.step(np.zeros(env.action_space.shape))
+    assert not info["diverged"]

@@ -34,7 +34,7 @@ def _write(tmp_path, text):
         ("task: {target_direction: [0, 1]}", "(config)", "sagittal plane only"),
         ("shape_space: all", "shape_space", "Input should be 'task' or 'full'"),
         # [L21] skill configs
-        ("character: humanoid", "(config)", "no [WL19] gait; set env.clip"),
+        ("character: humanoid", "(config)", "no procedural [WL19] gait; set env.gait"),
         ("env: {clip: humanoid_jump}", "(config)", "does not fit character 'walker'"),
         ("task: {gravity: [0.5, 1.5]}", "(config)", "task.gravity needs env.clip"),
         (

@@ -1,0 +1,148 @@
+"""The humanoid imitating its clips: a trained run judged by its target, from its checkpoint.
+
+For a clip gait run (`env.gait`, configs/humanoid_walk.yaml): episodes of 30 s (the papers'
+horizon) from random starting phases (`--episodes`, with the env's initial-state noise, seeds the
+training never used), the deterministic policy, and the target of its clip:
+
+| clip | no fall in 30 s | body position error | speed vs the clip's | within |
+|---|---|---|---|---|
+| walk | >= 95 % | <= 0.06 m | within 10 % | 20M env steps (a third of DeepMimic's 61M) |
+| run | >= 95 % | <= 0.06 m | within 10 % | 18M (53M / 3) |
+
+A fall is a fall contact (the root, chest or neck on the ground); the deviation termination is a
+training rule and not used here. The row also gives the run's env steps and the wall-clock of
+its training (from metrics.jsonl; a resumed run's pauses excluded: the sum of the gaps between
+iterations that are shorter than 10 minutes).
+
+    python benchmarks/humanoid.py eval RUN_DIR [--episodes 100] [--seed 7]
+    python benchmarks/humanoid.py table
+
+Writes benchmarks/results/humanoid_<config>_s<train seed>_<steps>.json and, with `table`,
+benchmarks/results/humanoid.json: every seed of every config with the mean.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+sys.path.insert(0, str(ROOT))
+
+# clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): Part 14's targets
+TARGETS = {
+    "humanoid_walk": (0.95, 0.06, 0.10, 20_000_000),
+    "humanoid_run": (0.95, 0.06, 0.10, 18_000_000),
+}
+PAUSE = 600.0  # s: a gap between iterations longer than this is a stopped-and-resumed run
+
+
+def training_wall_clock(run: Path) -> float:
+    """Seconds of training in a run's metrics.jsonl, pauses between sessions left out."""
+    times = []
+    for line in (run / "metrics.jsonl").read_text().splitlines():
+        row = json.loads(line)
+        if "iteration" in row and "time" in row:
+            times.append(row["time"])
+    gaps = np.diff(np.asarray(times))
+    return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
+
+
+def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
+    from paramimic.config import ExperimentConfig
+    from paramimic.evaluation import evaluate_config
+    from paramimic.rl.networks import ActorCritic
+    from services.learner import checkpoint
+
+    state = checkpoint.load(run)
+    cfg = ExperimentConfig.model_validate(state["config"])
+    if cfg.env.gait is None:
+        raise SystemExit(f"{run}: not a clip gait run (env.gait unset)")
+    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy.load_state_dict(state["learner"]["policy"])
+    policy.eval()
+    report = evaluate_config(policy, cfg, episodes, seed, grid_size=1, seconds=30.0)
+    report.pop("grid", None)
+    steps = int(state["progress"]["env_steps"])
+    no_fall, error, speed, budget = TARGETS.get(cfg.env.gait, (0.95, 0.06, 0.10, None))
+    checks = {
+        "no_fall": 1.0 - report["fall_percent"] / 100.0 >= no_fall,
+        "body_error": report["mean_body_error"] <= error,
+        "speed": abs(report["speed_ratio"] - 1.0) <= speed,
+        "budget": budget is None or steps <= budget,
+    }
+    return {
+        "config": cfg.name,
+        "gait": cfg.env.gait,
+        "train_seed": cfg.train.seed,
+        "eval_seed": seed,
+        "env_steps": steps,
+        "iteration": state["progress"]["iteration"],
+        "training_wall_clock_s": training_wall_clock(run),
+        "target": {"no_fall": no_fall, "body_error_m": error, "speed_within": speed,
+                   "env_steps": budget},  # fmt: skip
+        "checks": checks,
+        "met": all(checks.values()),
+        "report": report,
+    }
+
+
+def table() -> dict:
+    rows: dict[str, list] = {}
+    for path in sorted(RESULTS.glob("humanoid_*_s*_*k.json")):
+        r = json.loads(path.read_text())
+        rows.setdefault(r["config"], []).append(r)
+    out = {}
+    for config, runs in rows.items():
+        latest: dict[int, dict] = {}
+        for r in runs:  # the latest evaluation of each training seed
+            if r["env_steps"] >= latest.get(r["train_seed"], {"env_steps": -1})["env_steps"]:
+                latest[r["train_seed"]] = r
+        seeds = [latest[s] for s in sorted(latest)]
+        keys = ("fall_percent", "mean_body_error", "speed_ratio", "mean_root_drift")
+        out[config] = {
+            "seeds": {
+                r["train_seed"]: {k: r["report"][k] for k in keys}
+                | {"env_steps": r["env_steps"], "wall_clock_s": r["training_wall_clock_s"],
+                   "met": r["met"]}  # fmt: skip
+                for r in seeds
+            },
+            "mean": {k: float(np.mean([r["report"][k] for r in seeds])) for k in keys},
+            "met": len(seeds) >= 3 and all(r["met"] for r in seeds),
+        }
+    (RESULTS / "humanoid.json").write_text(json.dumps(out, indent=2))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    e = sub.add_parser("eval")
+    e.add_argument("run", type=Path)
+    e.add_argument("--episodes", type=int, default=100)
+    e.add_argument("--seed", type=int, default=7)
+    sub.add_parser("table")
+    args = ap.parse_args()
+    if args.cmd == "eval":
+        r = evaluate_run(args.run, args.episodes, args.seed)
+        name = f"{r['config']}_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
+        (RESULTS / name).write_text(json.dumps(r, indent=2))
+        rep = r["report"]
+        print(
+            f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps "
+            f"({r['training_wall_clock_s'] / 60:.0f} min): falls {rep['fall_percent']:.1f} %, "
+            f"body error {rep['mean_body_error']:.3f} m, speed {rep['speed_ratio']:.2f}x the "
+            f"clip's, drift {rep['mean_root_drift']:.2f} m; met: {r['met']} {r['checks']}"
+        )
+        print(f"wrote {RESULTS / name}")
+    else:
+        print(json.dumps(table(), indent=2))
+
+
+if __name__ == "__main__":
+    main()
