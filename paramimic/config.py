@@ -156,6 +156,14 @@ class SkillConfig(Section):
     w_task_continuous: float = Field(0.1, ge=0)
     tau_scale: PositiveFloat = Field(1.0, description="τ per unit action: Δφ in [e^-s, e^s]")
     trace_bins: int = Field(16, ge=2, description="reference-time bins of a motion trace")
+    rsi: float = Field(
+        0.0, ge=0, le=1, description="reference state initialisation (DeepMimic): this share of "
+        "the episodes that imitate m0 itself (no motion trace: [L21]'s π0) starts at a random "
+        "phase of the clip in its pose and velocity. Such episodes train π0 only: they have no "
+        "take-off and no whole-motion fitness, so they report no a', trace or fitness (never "
+        "the hindsight record or the elite set) and pay no task reward; 0: every episode "
+        "starts at the clip's start ([L21])",
+    )  # fmt: skip
     measures: dict[str, TaskMeasureConfig] = Field(
         default_factory=dict,
         description="declared task parameters: name -> measure (written inline under `task`)",
@@ -269,9 +277,11 @@ class EnvConfig(Section):
     def for_evaluation(self, max_episode_seconds: float | None = None) -> EnvConfig:
         """This section as evaluation, rendering and play run it: whole episodes, without the
         training devices that end an episode early (stall_speed_ratio, heading_error_limit,
-        deviation_limit), starting at uniform phases."""
+        deviation_limit), starting at uniform phases (a clip gait) or at the clip's start (a
+        skill: no RSI)."""
         update = {"stall_speed_ratio": None, "heading_error_limit": None, "deviation_limit": None}
         update["phase_sampling"] = "uniform"
+        update["skill"] = self.skill.model_copy(update={"rsi": 0.0})
         if max_episode_seconds is not None:
             update["max_episode_seconds"] = max_episode_seconds
         return self.model_copy(update=update)

@@ -256,3 +256,44 @@ def test_a_reference_unit_needs_a_measure_the_clip_has():
     with pytest.raises(ValueError, match="task.turn: root_rotation is 0 on the clip"):
         SkillEnv("walker", {"turn": (0.5, 2.0)},
                  EnvConfig(clip="planar_jump", skill={"measures": measures}))  # fmt: skip
+
+
+def test_rsi_starts_pi0_episodes_mid_clip_in_the_clips_pose_and_velocity():
+    """DeepMimic's reference state initialisation for [L21]'s π0: with env.skill.rsi = 1 every
+    episode without a motion trace starts at a random phase of the clip, moving as the clip
+    does; it reports no a', trace or fitness (never the elite set) and pays no task reward."""
+    import mujoco
+
+    from paramimic.envs.skill_env import SkillEnv
+
+    env = SkillEnv(
+        "humanoid",
+        {"gravity": (1.0, 1.0)},
+        {"clip": "humanoid_jump", "frame_skip": 20, "init_noise": 0.0, "skill": {"rsi": 1.0}},
+    )
+    starts = set()
+    for seed in range(3):
+        env.reset(seed=seed)
+        phi = env._phi
+        assert 0 < phi < env.length - 1
+        starts.add(round(phi, 6))
+        q = env._at(env._qa, phi)
+        c = env.character
+        assert env.data.qpos[c.qpos_idx] == pytest.approx(q[c.qpos_idx])
+        want = np.zeros(env.model.nv)
+        mujoco.mj_differentiatePos(env.model, want, env.dt, q, env._at(env._qa, phi + 1))
+        assert env.data.qvel == pytest.approx(want)
+        assert env.data.site_xpos[c.contact_site_ids, 2].min() >= 1e-3 - 1e-9  # not in the floor
+    assert len(starts) == 3
+    while True:
+        *_, term, trunc, info = env.step(np.zeros(env.action_space.shape))
+        assert info["reward_terms"]["task"] == 0.0
+        if term or trunc:
+            break
+    assert info["skill"] == {"achieved": None, "fitness": 0.0, "trace": None, "completed": False}
+    # a motion trace (P_θ's m_a, past π0) or evaluation: the clip's start, as [L21]
+    env.reset(seed=0, options={"motion": np.zeros(env.trace_shape)})
+    assert env._phi == 0.0
+    evaluation = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, env.config.for_evaluation())
+    evaluation.reset(seed=0)
+    assert evaluation._phi == 0.0

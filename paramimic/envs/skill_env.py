@@ -271,24 +271,34 @@ class SkillEnv(EnvCore):
         m, d, c = self.model, self.data, self.character
         mujoco.mj_resetData(m, d)
         noise = self.config.init_noise
-        d.qpos[:] = self._qa[0]
-        d.qpos[c.qpos_idx] += noise * self.np_random.standard_normal(self.nj)
-        d.qvel[:] = 0.0
+        rng = self.np_random
+        rsi = self._trace is None and self.skill.rsi > 0 and rng.random() < self.skill.rsi
+        # RSI: a random phase of the clip (not its last control step), else the clip's start
+        start = float(rng.random() * max(self.length - 1.0, 0.0)) if rsi else 0.0
+        self._rsi = start > 0.0
+        d.qpos[:] = self._at(self._qa, start)
+        d.qpos[c.qpos_idx] += noise * rng.standard_normal(self.nj)
+        height = 1 if self.root_nq == self.root_nv else 2
         mujoco.mj_kinematics(m, d)
         lowest = d.site_xpos[c.contact_site_ids, 2].min()
-        d.qpos[1 if self.root_nq == self.root_nv else 2] -= (
-            lowest - 1e-3
-        )  # the lowest foot on the ground
+        if self._rsi:  # the clip's own state: its velocity, its height (lifted off the floor)
+            ahead = self._at(self._qa, start + 1.0)
+            mujoco.mj_differentiatePos(m, d.qvel, self.dt, self._at(self._qa, start), ahead)
+            d.qpos[height] -= min(lowest - 1e-3, 0.0)
+        else:  # at rest, the lowest foot on the ground
+            d.qvel[:] = 0.0
+            d.qpos[height] -= lowest - 1e-3
         d.ctrl[:] = np.clip(d.qpos[c.qpos_idx], c.ctrl_low, c.ctrl_high)
         mujoco.mj_forward(m, d)
-        self._phi = 0.0
+        self._phi = start
         self._steps = 0
-        self._x0 = float(d.qpos[0])
+        # the root's x offset from m_a's (0 at the clip's start): the COM reference follows it
+        self._x0 = float(d.qpos[0]) - float(self._at(self._qa, start)[0] - self._qa[0, 0])
         self._watch_stability()
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._path: dict[str, list] = {k: [] for k in PATH}
         self._fired: set[str] = set()  # spikes paid this episode
-        self._measure_row(0.0)
+        self._measure_row(start)
         self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
         self._prev_q = d.qpos[c.qpos_idx].copy()
         obs = self._observe()
@@ -375,7 +385,7 @@ class SkillEnv(EnvCore):
     def _task_rewards(self, completed: bool) -> tuple[float | None, float | None]:
         """r_task of Eq. 8 for this step: over the continuous parameters in their window, and over
         the spike parameters whose event happens now (None where there is none)."""
-        if not self.measured:
+        if not self.measured or self._rsi:  # a mid-clip start measures no whole-motion task
             return None, None
         path = self._path
         phase, prev = path["phase"][-1], path["phase"][-2]
@@ -518,6 +528,8 @@ class SkillEnv(EnvCore):
 
     def _summary(self, completed: bool) -> dict:
         """Hindsight parameter a', fitness F (Eq. 10) and the trace of this episode."""
+        if self._rsi:  # π0's RSI episode: nothing for the hindsight record or the elite set
+            return {"achieved": None, "fitness": 0.0, "trace": None, "completed": False}
         achieved = self._task.copy()
         traj = self.episode_trajectory()
         for t in self.measured:  # hindsight a' by the parameter's own measure
