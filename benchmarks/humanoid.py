@@ -17,8 +17,9 @@ iterations that are shorter than 10 minutes).
     python benchmarks/humanoid.py eval RUN_DIR [--episodes 100] [--seed 7]
     python benchmarks/humanoid.py table
 
-Writes benchmarks/results/humanoid_<config>_s<train seed>_<steps>.json and, with `table`,
-benchmarks/results/humanoid.json: every seed of every config with the mean.
+Writes benchmarks/results/<config>_s<train seed>_<k steps>k.json and, with `table`,
+benchmarks/results/humanoid.json (every evaluation of every seed, the latest per seed judged)
+and the results table of docs/humanoid.md (between its `<!-- results -->` markers).
 """
 
 from __future__ import annotations
@@ -33,6 +34,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT))
+from benchmarks.markdown import markdown_table  # noqa: E402
+
+DOCS = ROOT / "docs" / "humanoid.md"
+MARK = ("<!-- results -->", "<!-- /results -->")
 
 # clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): Part 14's targets
 TARGETS = {
@@ -116,7 +121,29 @@ def table() -> dict:
             "met": len(seeds) >= 3 and all(r["met"] for r in seeds),
         }
     (RESULTS / "humanoid.json").write_text(json.dumps(out, indent=2))
+    _write_docs(rows)
     return out
+
+
+def _write_docs(rows: dict[str, list]) -> None:
+    """Every evaluation as a row of docs/humanoid.md's results table."""
+    header = ["config", "seed", "env steps", "training wall-clock", "episodes", "falls in 30 s",
+              "body error (m)", "speed / clip's", "root drift (m)", "target met"]  # fmt: skip
+    lines = []
+    for config, runs in sorted(rows.items()):
+        for r in sorted(runs, key=lambda r: (r["train_seed"], r["env_steps"])):
+            rep = r["report"]
+            lines.append([
+                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
+                f"{r['training_wall_clock_s'] / 60:.0f} min", rep["episodes"],
+                f"{rep['fall_percent']:.1f} %",
+                f"{rep['mean_body_error']:.3f}", f"{rep['speed_ratio']:.2f}",
+                f"{rep['mean_root_drift']:.2f}", "yes" if r["met"] else "no",
+            ])  # fmt: skip
+    text = DOCS.read_text()
+    head, rest = text.split(MARK[0], 1)
+    _, tail = rest.split(MARK[1], 1)
+    DOCS.write_text(f"{head}{MARK[0]}\n{markdown_table(header, lines)}\n{MARK[1]}{tail}")
 
 
 def main() -> None:
