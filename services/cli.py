@@ -201,7 +201,9 @@ def _fmt(v) -> str:
 
 @app.command("eval")
 def evaluate_cmd(
-    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    run: Annotated[
+        Path, typer.Argument(help="run directory, checkpoint file or shipped controller name")
+    ],
     episodes: Annotated[int, typer.Option(help="random tasks to evaluate")] = 300,
     seed: Annotated[int, typer.Option()] = 0,
     out: Annotated[Path | None, typer.Option(help="write the report as JSON here")] = None,
@@ -238,7 +240,7 @@ def evaluate_cmd(
     )
     report.update(
         {
-            "checkpoint": str(checkpoint.resolve(run)),
+            "checkpoint": str(checkpoint.resolve(_run_path(run))),
             "config": cfg.name,
             "iteration": state["progress"]["iteration"],
             "env_steps": state["progress"]["env_steps"],
@@ -273,13 +275,21 @@ def evaluate_cmd(
         console.print(f"wrote {write_heatmap(report['grid'], heatmap, title)}")
 
 
+def _run_path(run: Path) -> Path:
+    """A run directory or checkpoint as given, or the file of the shipped controller so named."""
+    from services import controllers
+
+    return run if run.exists() else controllers.find(str(run)) or run
+
+
 def _load_policy(run: Path, seconds: float | None = None):
-    """(config, policy in eval mode, checkpoint state) of a run directory or checkpoint."""
+    """(config, policy in eval mode, checkpoint state) of a run directory, a checkpoint or the
+    name of a shipped controller (`paramimic controllers list`)."""
     from paramimic.rl.networks import ActorCritic
     from services.learner import checkpoint
 
     try:
-        state = checkpoint.load(run)
+        state = checkpoint.load(_run_path(run))
     except (FileNotFoundError, checkpoint.CheckpointError) as e:
         _fail(str(e))
     cfg = ExperimentConfig.model_validate(state["config"])
@@ -312,7 +322,9 @@ def _parse_shapes(text: str, names: tuple[str, ...]) -> list[dict[str, float]]:
 
 @app.command()
 def render(
-    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    run: Annotated[
+        Path, typer.Argument(help="run directory, checkpoint file or shipped controller name")
+    ],
     shapes: Annotated[
         str,
         typer.Option(
@@ -383,7 +395,9 @@ def upgrade_checkpoint(
 
 @app.command("export")
 def export_cmd(
-    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    run: Annotated[
+        Path, typer.Argument(help="run directory, checkpoint file or shipped controller name")
+    ],
     out: Annotated[Path, typer.Option(help="the policy file to write")],
     format: Annotated[str, typer.Option(help="onnx or torchscript")] = "onnx",
 ) -> None:
@@ -400,7 +414,9 @@ def export_cmd(
 
 @app.command()
 def play(
-    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    run: Annotated[
+        Path, typer.Argument(help="run directory, checkpoint file or shipped controller name")
+    ],
     host: Annotated[str, typer.Option(help="address to serve on")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="port (0: any free port)")] = 8010,
 ) -> None:
@@ -417,6 +433,50 @@ def play(
     cfg, policy, state = _load_policy(run)
     console.print(f"play: http://{host}:{port}  ({cfg.name}, {cfg.character}; Ctrl-C to stop)")
     serve(cfg, policy, state, host, port)
+
+
+controllers_app = typer.Typer(
+    no_args_is_help=True, help="Trained controllers shipped with paramimic, taken by name."
+)
+app.add_typer(controllers_app, name="controllers")
+
+
+@controllers_app.command("list")
+def controllers_list() -> None:
+    """The shipped controllers: name, config, character, gait or clip, env steps trained."""
+    from services import controllers
+    from services.learner import checkpoint
+
+    from rich.table import Table
+
+    table = Table("name", "config", "character", "motion", "env steps")
+    for name in controllers.names():
+        state = checkpoint.read(controllers.find(name))
+        env = state["config"]["env"]
+        motion = env.get("gait") or env.get("clip") or "procedural gait"
+        table.add_row(name, state["config"]["name"], state["config"]["character"], motion,
+                      f"{state['progress']['env_steps']:,}")  # fmt: skip
+    console.print(table)
+
+
+@controllers_app.command("add")
+def controllers_add(
+    run: Annotated[Path, typer.Argument(help="run directory or checkpoint file")],
+    name: Annotated[str, typer.Option(help="the controller's name")],
+    folder: Annotated[
+        Path | None, typer.Option(help="write here (default: the package's controllers)")
+    ] = None,
+) -> None:
+    """Ship a run's controller: its config, policy and V̄ (no optimizer or sampler state) as a
+    small weights-only file that play, render and eval take by name."""
+    from services import controllers
+    from services.learner import checkpoint
+
+    try:
+        path = controllers.add(run, name, folder)
+    except (ValueError, FileNotFoundError, checkpoint.CheckpointError) as e:
+        _fail(str(e))
+    console.print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
 
 
 clip_app = typer.Typer(no_args_is_help=True, help="Motion clips: built-in ones and your own.")

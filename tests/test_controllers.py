@@ -1,0 +1,58 @@
+"""Shipped controllers: a run cut down to a small weights-only file that `paramimic eval`
+(and play, render, export) take by name, as a user runs them: a real subprocess, real files."""
+
+import json
+import os
+
+import pytest
+import torch
+from test_cli import _cli, _train_serial
+
+from services import controllers
+from services.learner import checkpoint
+
+WALK = {
+    "name": "tiny_walk",
+    "character": "humanoid",
+    "shape_space": "full",
+    "shape_scale": 0.0,
+    "env": {"gait": "humanoid_walk", "physics_hz": 300, "max_episode_seconds": 1.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1, "hidden_sizes": [32, 32]},
+    "actors": {"num_envs": 4},
+    "train": {"total_steps": 256, "checkpoint_every": 1},
+}
+
+
+def test_a_run_ships_as_a_controller_that_eval_takes_by_name(tmp_path):
+    _, run = _train_serial(tmp_path, WALK)
+    name = f"test_tiny_walk_{os.getpid()}"
+    try:
+        res = _cli("controllers", "add", run, "--name", name)
+        assert res.returncode == 0, res.stdout + res.stderr
+        path = controllers.find(name)
+        assert path is not None and path.parent == controllers.directory()
+        full = checkpoint.resolve(run)
+        assert path.stat().st_size < full.stat().st_size / 2  # no optimizer, no sampler state
+        state = checkpoint.read(path)  # plain data: loads with weights_only
+        assert set(state) == {"config", "obs_dim", "act_dim", "marginal", "progress", "learner"}
+        assert set(state["learner"]) == {"policy"}
+        torch.load(path, weights_only=True)
+        res = _cli("controllers", "list")
+        assert name in res.stdout and "humanoid_walk" in res.stdout
+        out = tmp_path / "eval.json"
+        res = _cli("eval", name, "--episodes", 2, "--seconds", 0.5, "--out", out)
+        assert res.returncode == 0, res.stdout + res.stderr
+        report = json.loads(out.read_text())
+        assert report["episodes"] == 2 and report["config"] == "tiny_walk"
+        assert {"mean_body_error", "mean_root_drift", "speed_ratio"} <= set(report)
+    finally:
+        path = controllers.directory() / f"{name}.pt"
+        path.unlink(missing_ok=True)
+    res = _cli("eval", name, "--episodes", 2)  # gone: a clear error, not a traceback
+    assert res.returncode != 0 and "no checkpoint" in res.stdout + res.stderr
+
+
+def test_a_controller_name_must_be_plain():
+    with pytest.raises(ValueError, match="letters, digits"):
+        controllers.add(controllers.directory(), "../escape")
+    assert controllers.find("../escape") is None
