@@ -444,10 +444,10 @@ app.add_typer(controllers_app, name="controllers")
 @controllers_app.command("list")
 def controllers_list() -> None:
     """The shipped controllers: name, config, character, gait or clip, env steps trained."""
+    from rich.table import Table
+
     from services import controllers
     from services.learner import checkpoint
-
-    from rich.table import Table
 
     table = Table("name", "config", "character", "motion", "env steps")
     for name in controllers.names():
