@@ -14,6 +14,7 @@ while meeting the task goals. Observation, action and reward follow [WL19] §3.2
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from typing import Any
 
 import gymnasium as gym
@@ -39,6 +40,7 @@ from paramimic.motion.clip_gait import ClipGait
 from paramimic.motion.phase import PhaseSampler
 from paramimic.motion.retarget import RetargetedGait
 
+CLIP_GAITS = 32  # clip gait tables kept per env, as `compiled_body` keeps 32 bodies
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
 SENSOR_OFF = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 FUTURE_POSES = (0.5, 1.0)  # s: reference postures observed ahead ([WL19] §4.1)
@@ -52,7 +54,7 @@ class ParamEnv(EnvCore):
         self._velocity_idx = self.goal_index("target_velocity")
         self._direction_idx = self.goal_index("target_direction")
         self._clip = None  # a clip gait's clip (env.gait), tabulated per body in `_bind`
-        self._clip_gaits: dict[tuple, ClipGait] = {}
+        self._clip_gaits: OrderedDict[tuple, ClipGait] = OrderedDict()
         gait = self.registration.gait
         if self.config.gait is not None:
             if self.definition.planar:
@@ -135,14 +137,17 @@ class ParamEnv(EnvCore):
         self._reference = self._tabulate_reference() if self.motion is not None else None
 
     def _clip_gait(self, body: Body) -> ClipGait:
-        """The clip gait on `body` (its root path scaled by the body's hip height), cached."""
+        """The clip gait on `body` (its root path scaled by the body's hip height), cached for the
+        last `CLIP_GAITS` bodies (a family draws a new body at nearly every reset)."""
         key = tuple(sorted(body.shape.items()))
-        gait = self._clip_gaits.get(key)
+        gait = self._clip_gaits.pop(key, None)
         if gait is None:
             joints = tuple(j.name for j in self.definition.joints)
             to_qpos = lambda pose: self.definition.pose_qpos(body, pose)  # noqa: E731
             gait = ClipGait.from_clip(self._clip, joints, to_qpos, body.qpos_idx)
-            self._clip_gaits[key] = gait
+        self._clip_gaits[key] = gait
+        while len(self._clip_gaits) > CLIP_GAITS:
+            self._clip_gaits.popitem(last=False)
         return gait
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
