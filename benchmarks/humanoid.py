@@ -16,6 +16,7 @@ iterations that are shorter than 10 minutes).
 
     python benchmarks/humanoid.py eval RUN_DIR [--episodes 100] [--seed 7]
     python benchmarks/humanoid.py table
+    python benchmarks/humanoid.py curve RUN_DIR [RUN_DIR ...]   # training curves as a PNG
 
 The recipe's screens (network, epochs, physics rate, mode, start phases) train a variant of a
 config in its own mode on a local Ray for the same wall-clock budget, alone on the machine, and
@@ -162,6 +163,38 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
     return out
 
 
+def curve(runs: list[Path], out: Path) -> Path:
+    """Training curves of runs from their metrics.jsonl: the mean length of the episodes each
+    iteration ended (s) and the mean reward per step, against env steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_len, ax_rew) = plt.subplots(1, 2, figsize=(10, 3.5))
+    for run in runs:
+        rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+        rows = [r for r in rows if "iteration" in r and "mean_length" in r]
+        config = yaml_config(run)
+        dt = 1.0 / config["env"]["control_hz"]
+        steps = np.array([r["env_steps"] for r in rows]) / 1e6
+        label = f"{config['name']} seed {config['train']['seed']}"
+        ax_len.plot(steps, [r["mean_length"] * dt for r in rows], label=label)
+        ax_rew.plot(steps, [r.get("mean_step_reward", np.nan) for r in rows], label=label)
+    ax_len.set(xlabel="env steps (M)", ylabel="training episode length (s)")
+    ax_rew.set(xlabel="env steps (M)", ylabel="mean reward per step")
+    ax_len.legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    return out
+
+
+def yaml_config(run: Path) -> dict:
+    import yaml
+
+    return yaml.safe_load((run / "config.yaml").read_text())
+
+
 def table() -> dict:
     rows: dict[str, list] = {}
     for path in sorted(RESULTS.glob("humanoid_*_s*_*k.json")):
@@ -219,6 +252,9 @@ def main() -> None:
     e.add_argument("--episodes", type=int, default=100)
     e.add_argument("--seed", type=int, default=7)
     sub.add_parser("table")
+    cu = sub.add_parser("curve")
+    cu.add_argument("runs", type=Path, nargs="+")
+    cu.add_argument("--out", type=Path, default=RESULTS / "humanoid_curves.png")
     sc = sub.add_parser("screen")
     sc.add_argument("--config", default="configs/humanoid_walk.yaml")
     sc.add_argument("--set", action="append", default=[], dest="sets")
@@ -226,6 +262,9 @@ def main() -> None:
     sc.add_argument("--seed", type=int, default=0)
     sc.add_argument("--episodes", type=int, default=50)
     args = ap.parse_args()
+    if args.cmd == "curve":
+        print(f"wrote {curve(args.runs, args.out)}")
+        return
     if args.cmd == "screen":
         screen(args.config, args.sets, args.budget, args.seed, args.episodes)
         return
