@@ -269,3 +269,19 @@ def test_a_clip_gait_family_changes_shape_on_the_fly():
     assert env.clip_speed == pytest.approx(base_speed * ratio)
     *_, info = env.step(np.zeros(env.action_space.shape))
     assert not info["diverged"]
+
+
+def test_deviated_episodes_are_reported_as_such_not_as_falls():
+    """The training metrics count deviations apart from falls (episode_metrics)."""
+    from paramimic.rl.rollout import RolloutWorker
+    from services.learner.trainer import episode_metrics
+
+    cfg = GAIT | {"deviation_limit": 0.3, "max_episode_seconds": 3.0}
+    w = RolloutWorker(lambda: make_env("humanoid", {}, cfg), 2, 1, 28, seed=0)
+    f = w.collect(60, use_policy=False)  # zero actions: the reference's PD targets alone
+    assert f.episodes and all(e.ended_early for e in f.episodes if e.length < 90)
+    deviated = [e for e in f.episodes if e.deviated]
+    assert deviated and not any(e.fell for e in deviated)
+    m = episode_metrics(f.episodes)
+    assert m["deviated_percent"] == pytest.approx(100.0 * len(deviated) / len(f.episodes))
+    assert f.episodes[0].to_dict()["deviated"] == f.episodes[0].deviated
