@@ -156,6 +156,12 @@ class SkillConfig(Section):
     w_task_continuous: float = Field(0.1, ge=0)
     tau_scale: PositiveFloat = Field(1.0, description="τ per unit action: Δφ in [e^-s, e^s]")
     trace_bins: int = Field(16, ge=2, description="reference-time bins of a motion trace")
+    hold_seconds: float = Field(
+        0.0, ge=0, description="after the clip's end the episode goes on this long with the "
+        "reference holding the clip's last frame; its summary (a', F and trace as at the clip's "
+        "end) says `held`: no fall in that time. For judging one-shot skills (land and stand); "
+        "0: the episode ends at the clip's end ([L21])",
+    )  # fmt: skip
     rsi: float = Field(
         0.0, ge=0, le=1, description="reference state initialisation (DeepMimic): this share of "
         "the episodes that imitate m0 itself (no motion trace: [L21]'s π0) starts at a random "

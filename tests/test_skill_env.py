@@ -297,3 +297,28 @@ def test_rsi_starts_pi0_episodes_mid_clip_in_the_clips_pose_and_velocity():
     evaluation = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, env.config.for_evaluation())
     evaluation.reset(seed=0)
     assert evaluation._phi == 0.0
+
+
+def test_hold_seconds_goes_on_past_the_clips_end_and_says_whether_the_body_stood():
+    """Judging a one-shot skill: the clip's summary as at its end (a', F, the spike paid then),
+    then `hold_seconds` more of the last frame; `held` is whether it stood without a fall."""
+    plain = SkillEnv("walker", TASK, EnvConfig(clip="planar_jump"))
+    held = SkillEnv("walker", TASK, EnvConfig(clip="planar_jump", skill={"hold_seconds": 1.0}))
+    zero = np.zeros(plain.action_space.shape)
+    rows = _run(plain, lambda t: zero, {"task": [1.0, 0.3]})
+    ends = len(rows)
+    assert rows[-1][3]["skill"]["completed"] and not rows[-1][3]["fell"]
+    rows_held = _run(held, lambda t: zero, {"task": [1.0, 0.3]})
+    end = rows_held[ends - 1][3]  # the same step: the clip ends, the episode does not
+    assert not (rows_held[ends - 1][1] or rows_held[ends - 1][2]) and "skill" not in end
+    assert end["reward_spike"] == pytest.approx(rows[-1][3]["reward_spike"])
+    r, te, tr, info = rows_held[-1]
+    assert te and not tr
+    skill = info["skill"]
+    for key in ("achieved", "fitness", "completed"):
+        assert skill[key] == pytest.approx(rows[-1][3]["skill"][key])
+    if skill["held"]:  # stood: 30 more control steps (1 s at 30 Hz)
+        assert len(rows_held) == ends + 30 and not info["fell"]
+    else:  # fell while holding
+        assert len(rows_held) < ends + 30 and info["fell"]
+    assert sum(row[3]["reward_spike"] > 0 for row in rows_held) == 1  # paid once

@@ -89,7 +89,8 @@ class SkillEnv(EnvCore):
         self.trace_dim = self.root_nv + self.nj + 1  # (d_root, d_joints, τ) per bin
         self.trace_shape = (self.skill.trace_bins, self.trace_dim)
         self._bins = (np.arange(self.skill.trace_bins) + 0.5) * self.length / self.skill.trace_bins
-        self._max_steps = int(np.ceil(self.length * np.exp(TAU_LIMIT))) + 1
+        self._hold_steps = int(round(self.skill.hold_seconds / self.dt))
+        self._max_steps = int(np.ceil(self.length * np.exp(TAU_LIMIT))) + 1 + self._hold_steps
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.nj + 1,), np.float32)
         self._task = self.task_space.center.copy()
         self.reset(seed=0)
@@ -298,6 +299,8 @@ class SkillEnv(EnvCore):
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._path: dict[str, list] = {k: [] for k in PATH}
         self._fired: set[str] = set()  # spikes paid this episode
+        self._held: dict | None = None  # the summary at the clip's end while holding after it
+        self._hold_left = 0
         self._measure_row(start)
         self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
         self._prev_q = d.qpos[c.qpos_idx].copy()
@@ -327,12 +330,14 @@ class SkillEnv(EnvCore):
         obs = self._observe()
         self._last_obs = obs
         fell = self.fall_contact()
-        completed = phi_next >= self.length and not fell
+        completed = phi_next >= self.length and not fell and self._held is None
         r_continuous, r_spike = self._task_rewards(completed)
         reward = l21_reward(r_track, r_continuous or 0.0, self._w_tracking, self._w_continuous)
         spike = 0.0 if r_spike is None else self._w_spike * r_spike  # Eq. 5, paid at once
         r_task = r_continuous if r_continuous is not None else r_spike
         terms.append(0.0 if r_task is None else r_task)
+        if self._held is not None or completed and self._hold_steps:  # standing after the end
+            return self._hold(obs, reward + spike, spike, dphi, terms, fell, completed)
         if fell or completed or self._steps >= self._max_steps:
             return self._end(
                 obs,
@@ -346,6 +351,18 @@ class SkillEnv(EnvCore):
             )
         info = self._info(dphi, spike, terms, fell=False)
         return obs, reward + spike, False, False, info
+
+    def _hold(self, obs, reward, spike, dphi, terms, fell, completed):
+        """`hold_seconds` after the clip's end: the summary is the clip end's; the episode ends
+        on a fall or when the time is up, reporting whether the body stood."""
+        if completed:
+            self._held, self._hold_left = self._summary(True), self._hold_steps
+        self._hold_left -= 0 if completed else 1
+        info = self._info(dphi, spike, terms, fell=fell)
+        if fell or self._hold_left <= 0 or self._steps >= self._max_steps:
+            info["skill"] = self._held | {"held": not fell}
+            return obs, reward, True, False, info
+        return obs, reward, False, False, info
 
     # --- task parameters as measures ---------------------------------------------------------
 
