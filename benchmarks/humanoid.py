@@ -9,12 +9,21 @@ training never used), the deterministic policy, and the target of its clip:
 | walk | >= 95 % | <= 0.06 m | within 10 % | 20M env steps (a third of DeepMimic's 61M) |
 | run | >= 95 % | <= 0.06 m | within 10 % | 18M (53M / 3) |
 
+One-shot skills ([L21]'s π0, `env.clip`): `skill RUN_DIR` makes 100 tries from the clip's start
+(seeds 0-99 of the env's initial-state noise) at the clip's own parameter a0, each going on 1 s
+past the clip's end (`env.skill.hold_seconds`). A jump succeeds when the COM rises at least
+80 % of the clip's rise and the body then stands the second without a fall (target: 90 % of
+tries within 29M env steps); a backflip (24M) or cartwheel (17M) when the root turns through at
+least 90 % of the clip's own rotation about the clip's axis and the body then stands (target:
+80 % of tries). The jump's body-error target (<= 0.10 m) is not measured by this script yet.
+
 A fall is a fall contact (the root, chest or neck on the ground); the deviation termination is a
 training rule and not used here. The row also gives the run's env steps and the wall-clock of
 its training (from metrics.jsonl; a resumed run's pauses excluded: the sum of the gaps between
 iterations that are shorter than 10 minutes).
 
     python benchmarks/humanoid.py eval RUN_DIR [--episodes 100] [--seed 7]
+    python benchmarks/humanoid.py skill RUN_DIR [--tries 100]
     python benchmarks/humanoid.py table
     python benchmarks/humanoid.py curve RUN_DIR [RUN_DIR ...]   # training curves as a PNG
 
@@ -52,6 +61,12 @@ MARK = ("<!-- results -->", "<!-- /results -->")
 TARGETS = {
     "humanoid_walk": (0.95, 0.06, 0.10, 20_000_000),
     "humanoid_run": (0.95, 0.06, 0.10, 18_000_000),
+}
+# one-shot clip -> (what a try must do, share of tries, env steps): Part 14's targets
+SKILL_TARGETS = {
+    "humanoid_jump": ("rise", 0.90, 29_000_000),
+    "humanoid_backflip": ("rotation", 0.80, 24_000_000),
+    "humanoid_cartwheel": ("rotation", 0.80, 17_000_000),
 }
 PAUSE = 600.0  # s: a gap between iterations longer than this is a stopped-and-resumed run
 
@@ -98,12 +113,75 @@ def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
         "env_steps": steps,
         "iteration": state["progress"]["iteration"],
         "training_wall_clock_s": training_wall_clock(run),
-        "target": {"no_fall": no_fall, "body_error_m": error, "speed_within": speed,
-                   "env_steps": budget},  # fmt: skip
+        "target": {
+            "no_fall": no_fall,
+            "body_error_m": error,
+            "speed_within": speed,
+            "env_steps": budget,
+        },  # fmt: skip
         "checks": checks,
         "met": all(checks.values()),
         "report": report,
     }
+
+
+def evaluate_skill(run: Path, tries: int) -> dict:
+    """`tries` of a one-shot skill run from the clip's start, judged by its target."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.envs.skill_env import SkillEnv
+    from paramimic.evaluation import deterministic
+    from paramimic.motion.measures import com_rise, rotation_steps
+    from paramimic.rl.networks import ActorCritic
+    from services.learner import checkpoint
+
+    state = checkpoint.load(run)
+    cfg = ExperimentConfig.model_validate(state["config"])
+    if cfg.env.clip is None:
+        raise SystemExit(f"{run}: not a skill run (env.clip unset)")
+    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy.load_state_dict(state["learner"]["policy"])
+    act = deterministic(policy)
+    env_cfg = cfg.env.for_evaluation()
+    env_cfg = env_cfg.model_copy(
+        update={"skill": env_cfg.skill.model_copy(update={"hold_seconds": 1.0})}
+    )
+    env = SkillEnv(cfg.character, cfg.task, env_cfg)
+    clip_name = Path(str(cfg.env.clip)).stem.replace("humanoid3d_", "humanoid_")
+    kind, share, budget = SKILL_TARGETS.get(clip_name, ("rise", 0.9, None))
+    a0 = env.reference_task()
+    env.reset(seed=0, options={"task": a0})
+    ref = env.reference
+    clip_rise = com_rise(ref)
+    clip_turn = rotation_steps(ref).sum(axis=0)
+    clip_angle = float(np.linalg.norm(clip_turn))
+    axis = clip_turn / max(clip_angle, 1e-9)
+    tries_out = []
+    for i in range(tries):
+        obs, _ = env.reset(seed=i, options={"task": a0})
+        while True:
+            obs, _, te, tr, info = env.step(act(obs[None])[0])
+            if te or tr:
+                break
+        traj = env.episode_trajectory()
+        skill = info.get("skill", {})
+        stood = bool(skill.get("completed") and skill.get("held"))
+        rise = com_rise(traj)
+        angle = float(rotation_steps(traj).sum(axis=0) @ axis) if len(traj) > 1 else 0.0
+        ok = rise >= 0.8 * clip_rise if kind == "rise" else angle >= 0.9 * clip_angle
+        tries_out.append({"stood": stood, "rise": rise, "angle": angle, "success": stood and ok})
+    success = float(np.mean([t["success"] for t in tries_out]))
+    steps = int(state["progress"]["env_steps"])
+    return {
+        "config": cfg.name, "clip": clip_name, "train_seed": cfg.train.seed,
+        "env_steps": steps, "training_wall_clock_s": training_wall_clock(run),
+        "clip_com_rise_m": clip_rise, "clip_rotation_rad": clip_angle,
+        "success_share": success, "stood_share": float(np.mean([t["stood"] for t in tries_out])),
+        "mean_rise_m": float(np.mean([t["rise"] for t in tries_out])),
+        "mean_rotation_rad": float(np.mean([t["angle"] for t in tries_out])),
+        "target": {"kind": kind, "share": share, "env_steps": budget},
+        "met": success >= share and (budget is None or steps <= budget),
+        "tries": tries_out,
+    }  # fmt: skip
 
 
 def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int) -> dict:
@@ -198,6 +276,8 @@ def yaml_config(run: Path) -> dict:
 def table() -> dict:
     rows: dict[str, list] = {}
     for path in sorted(RESULTS.glob("humanoid_*_s*_*k.json")):
+        if "_skill_" in path.name or "screen" in path.name:
+            continue
         r = json.loads(path.read_text())
         rows.setdefault(r["config"], []).append(r)
     out = {}
@@ -211,8 +291,11 @@ def table() -> dict:
         out[config] = {
             "seeds": {
                 r["train_seed"]: {k: r["report"][k] for k in keys}
-                | {"env_steps": r["env_steps"], "wall_clock_s": r["training_wall_clock_s"],
-                   "met": r["met"]}  # fmt: skip
+                | {
+                    "env_steps": r["env_steps"],
+                    "wall_clock_s": r["training_wall_clock_s"],
+                    "met": r["met"],
+                }  # fmt: skip
                 for r in seeds
             },
             "mean": {k: float(np.mean([r["report"][k] for r in seeds])) for k in keys},
@@ -252,6 +335,9 @@ def main() -> None:
     e.add_argument("--episodes", type=int, default=100)
     e.add_argument("--seed", type=int, default=7)
     sub.add_parser("table")
+    sk = sub.add_parser("skill")
+    sk.add_argument("run", type=Path)
+    sk.add_argument("--tries", type=int, default=100)
     cu = sub.add_parser("curve")
     cu.add_argument("runs", type=Path, nargs="+")
     cu.add_argument("--out", type=Path, default=RESULTS / "humanoid_curves.png")
@@ -262,6 +348,18 @@ def main() -> None:
     sc.add_argument("--seed", type=int, default=0)
     sc.add_argument("--episodes", type=int, default=50)
     args = ap.parse_args()
+    if args.cmd == "skill":
+        r = evaluate_skill(args.run, args.tries)
+        name = f"{r['config']}_skill_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
+        (RESULTS / name).write_text(json.dumps(r, indent=2))
+        share, stood = 100 * r["success_share"], 100 * r["stood_share"]
+        print(
+            f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps: {share:.0f} % of "
+            f"tries succeed ({r['target']['kind']}), {stood:.0f} % stand 1 s past the end; "
+            f"met: {r['met']}"
+        )
+        print(f"wrote {RESULTS / name}")
+        return
     if args.cmd == "curve":
         print(f"wrote {curve(args.runs, args.out)}")
         return
