@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 from paramimic.motion.clip import Clip, ClipPose
 
 SAMPLES = 256  # table rows per cycle
+IN_PLACE = 0.1  # m/s: a clip whose root travels slower dances in place (faces its first frame's way)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
@@ -73,7 +74,7 @@ class ClipGait:
             raise ValueError(f"clip gaits need a free root; qpos has {qpos.shape[1]} entries")
         rot = Rotation.from_quat(qpos[:, 3:7], scalar_first=True)
         drift = qpos[-1, :2] - qpos[0, :2]
-        if np.hypot(*drift) < 1e-6:  # in place: its first frame's facing is forward
+        if np.hypot(*drift) < IN_PLACE * T:  # in place: its first frame's facing is forward
             travel = float(rot[0].as_euler("ZYX")[0])
         else:
             travel = float(np.arctan2(drift[1], drift[0]))
