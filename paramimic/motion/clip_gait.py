@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 from paramimic.motion.clip import Clip, ClipPose
 
 SAMPLES = 256  # table rows per cycle
-IN_PLACE = 0.1  # m/s: a clip whose root travels slower dances in place (faces its first frame's way)
+IN_PLACE = 0.1  # m/s: a clip travelling slower is in place (it faces its first frame's way)
 
 
 def _wrap(x: np.ndarray) -> np.ndarray:
