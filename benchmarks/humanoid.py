@@ -57,12 +57,12 @@ from benchmarks.markdown import markdown_table  # noqa: E402
 DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
 
-# clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): Part 14's targets
+# clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): the targets of docs/humanoid.md
 TARGETS = {
     "humanoid_walk": (0.95, 0.06, 0.10, 20_000_000),
     "humanoid_run": (0.95, 0.06, 0.10, 18_000_000),
 }
-# one-shot clip -> (what a try must do, share of tries, env steps): Part 14's targets
+# one-shot clip -> (what a try must do, share of tries, env steps): the targets of docs/humanoid.md
 SKILL_TARGETS = {
     "humanoid_jump": ("rise", 0.90, 29_000_000),
     "humanoid_backflip": ("rotation", 0.80, 24_000_000),
