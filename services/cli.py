@@ -277,7 +277,7 @@ def evaluate_cmd(
 
 def _run_path(run: Path) -> Path:
     """A run directory or checkpoint as given, or the file of the shipped controller so named."""
-    from services import controllers
+    from services.learner import controllers
 
     return run if run.exists() else controllers.find(str(run)) or run
 
@@ -446,8 +446,7 @@ def controllers_list() -> None:
     """The shipped controllers: name, config, character, gait or clip, env steps trained."""
     from rich.table import Table
 
-    from services import controllers
-    from services.learner import checkpoint
+    from services.learner import checkpoint, controllers
 
     table = Table("name", "config", "character", "motion", "env steps")
     for name in controllers.names():
@@ -469,8 +468,7 @@ def controllers_add(
 ) -> None:
     """Ship a run's controller: its config, policy and V̄ (no optimizer or sampler state) as a
     small weights-only file that play, render and eval take by name."""
-    from services import controllers
-    from services.learner import checkpoint
+    from services.learner import checkpoint, controllers
 
     try:
         path = controllers.add(run, name, folder)

@@ -8,8 +8,7 @@ import pytest
 import torch
 from test_cli import _cli, _train_serial
 
-from services import controllers
-from services.learner import checkpoint
+from services.learner import checkpoint, controllers
 
 WALK = {
     "name": "tiny_walk",
