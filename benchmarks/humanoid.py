@@ -82,19 +82,26 @@ def training_wall_clock(run: Path) -> float:
     return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
 
 
-def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
+def load_run(run: Path):
+    """(checkpoint state, config, policy in eval mode) of a run directory or checkpoint."""
     from paramimic.config import ExperimentConfig
-    from paramimic.evaluation import evaluate_config
     from paramimic.rl.networks import ActorCritic
     from services.learner import checkpoint
 
     state = checkpoint.load(run)
     cfg = ExperimentConfig.model_validate(state["config"])
-    if cfg.env.gait is None:
-        raise SystemExit(f"{run}: not a clip gait run (env.gait unset)")
     policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
     policy.load_state_dict(state["learner"]["policy"])
     policy.eval()
+    return state, cfg, policy
+
+
+def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
+    from paramimic.evaluation import evaluate_config
+
+    state, cfg, policy = load_run(run)
+    if cfg.env.gait is None:
+        raise SystemExit(f"{run}: not a clip gait run (env.gait unset)")
     report = evaluate_config(policy, cfg, episodes, seed, grid_size=1, seconds=30.0)
     report.pop("grid", None)
     steps = int(state["progress"]["env_steps"])
@@ -127,19 +134,13 @@ def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
 
 def evaluate_skill(run: Path, tries: int) -> dict:
     """`tries` of a one-shot skill run from the clip's start, judged by its target."""
-    from paramimic.config import ExperimentConfig
     from paramimic.envs.skill_env import SkillEnv
     from paramimic.evaluation import deterministic
     from paramimic.motion.measures import com_rise, rotation_steps
-    from paramimic.rl.networks import ActorCritic
-    from services.learner import checkpoint
 
-    state = checkpoint.load(run)
-    cfg = ExperimentConfig.model_validate(state["config"])
+    state, cfg, policy = load_run(run)
     if cfg.env.clip is None:
         raise SystemExit(f"{run}: not a skill run (env.clip unset)")
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
-    policy.load_state_dict(state["learner"]["policy"])
     act = deterministic(policy)
     env_cfg = cfg.env.for_evaluation()
     env_cfg = env_cfg.model_copy(
