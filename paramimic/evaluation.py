@@ -4,9 +4,9 @@ Fall-down % within the horizon, task achievement (mean cumulative task reward), 
 per-parameter returns over a grid of two task dimensions, and uniformity: min/mean and the
 coefficient of variation of the per-parameter returns. On a clip gait (`env.gait`) also the
 imitation measures: the body position error (every body against its reference, each relative
-to its own root in its own heading frame, averaged over bodies and control steps, m), the root
-drift (the root's mean horizontal distance from the reference root path, m) and the forward
-speed against the clip's.
+to its own root in its own heading frame, averaged over bodies and control steps, m; on an [L21]
+skill too, against m_a), the root drift (the root's mean horizontal distance from the reference
+root path, m) and the forward speed against the clip's.
 """
 
 from __future__ import annotations
@@ -79,10 +79,11 @@ def run_episodes(
             s["ret"] += r
             s["task"] += info["reward_terms"]["task"]
             s["len"] += 1
-            tracks = getattr(env, "clip_speed", None) is not None
-            if tracks and not info["diverged"]:
-                s["error"] += env.body_error()[0]
-                s["drift"] += env.root_drift()
+            bodies = getattr(env, "tracks_bodies", False)
+            path = getattr(env, "clip_speed", None) is not None
+            if not info["diverged"]:
+                s["error"] += env.body_error()[0] if bodies else 0.0
+                s["drift"] += env.root_drift() if path else 0.0
             if te or tr:
                 results[s["k"]] = EpisodeResult(
                     tasks[s["k"]],
@@ -93,9 +94,9 @@ def run_episodes(
                     float(env.data.qpos[0]) - s["x0"],
                     s["len"] * env.dt,
                     info["skill"]["fitness"] if "skill" in info else None,
-                    s["error"] / s["len"] if tracks else None,
-                    s["drift"] / s["len"] if tracks else None,
-                    env.clip_speed if tracks else None,
+                    s["error"] / s["len"] if bodies else None,
+                    s["drift"] / s["len"] if path else None,
+                    env.clip_speed if path else None,
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -140,9 +141,11 @@ def _tracking(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
     """The clip-gait measures over episodes (each episode's per-step mean, then the mean)."""
     if not results or results[0].body_error is None:
         return {}
+    out = {"mean_body_error": float(np.mean([r.body_error for r in results]))}
+    if results[0].clip_speed is None:  # a skill: no root path to follow
+        return out
     clip = np.array([r.clip_speed for r in results])
-    return {
-        "mean_body_error": float(np.mean([r.body_error for r in results])),
+    return out | {
         "mean_root_drift": float(np.mean([r.root_drift for r in results])),
         "clip_speed": float(clip.mean()),
         "speed_ratio": float(np.mean(speeds / clip)),

@@ -4,6 +4,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from paramimic.config import EnvConfig, SkillConfig
 from paramimic.envs import make_env
@@ -322,3 +323,59 @@ def test_hold_seconds_goes_on_past_the_clips_end_and_says_whether_the_body_stood
     else:  # fell while holding
         assert len(rows_held) < ends + 30 and info["fell"]
     assert sum(row[3]["reward_spike"] > 0 for row in rows_held) == 1  # paid once
+
+
+def test_body_error_against_m_a_by_hand():
+    """The body position error of a skill: zero in m_a's own pose wherever the root stands and
+    faces; a bent elbow moves only the bodies after it, each by the chord of its circle."""
+    env = SkillEnv(
+        "humanoid", {"gravity": (1.0, 1.0)}, EnvConfig(clip="humanoid_jump", init_noise=0.0)
+    )
+    env.reset(seed=0)
+    m, d = env.model, env.data
+    env._phi = 12.0  # a reference row: m_a's pose exactly
+    d.qpos[:] = env._qa[12]
+    d.qpos[0] += 3.0  # elsewhere on the floor, turned 1 rad about the vertical
+    root = Rotation.from_quat(d.qpos[3:7], scalar_first=True)
+    d.qpos[3:7] = (Rotation.from_euler("z", 1.0) * root).as_quat(scalar_first=True)
+    mujoco.mj_kinematics(m, d)
+    assert env.body_error() == pytest.approx((0.0, 0.0), abs=1e-9)
+    joint = m.joint("right_elbow")
+    elbow = joint.bodyid[0]
+    o, axis = d.xanchor[joint.id].copy(), d.xaxis[joint.id].copy()
+    moved = [b for b in range(m.nbody) if b != elbow and m.body_rootid[b] and _below(m, b, elbow)]
+    chords = []
+    for b in [elbow, *moved]:
+        r = d.xpos[b] - o
+        chords.append(2 * np.linalg.norm(r - (r @ axis) * axis) * np.sin(0.3))
+    d.qpos[joint.qposadr[0]] += 0.6
+    mujoco.mj_kinematics(m, d)
+    n = m.nbody - env.character.root_body_id - 1
+    assert max(chords) > 0.05  # the wrist
+    assert env.body_error() == pytest.approx((sum(chords) / n, max(chords)), rel=1e-6)
+
+
+def _below(m, b: int, ancestor: int) -> bool:
+    while b > 0:
+        b = m.body_parentid[b]
+        if b == ancestor:
+            return True
+    return False
+
+
+def test_evaluation_reports_a_skills_body_error_and_no_root_path():
+    from paramimic.evaluation import run_episodes, summarize
+
+    task = {"gravity": (1.0, 1.0)}
+    env = SkillEnv("humanoid", task, EnvConfig(clip="humanoid_jump", frame_skip=20))
+    zero = np.zeros(env.action_space.shape, np.float32)
+    results = run_episodes(
+        lambda obs: np.tile(zero, (len(obs), 1)),
+        lambda: SkillEnv("humanoid", task, EnvConfig(clip="humanoid_jump", frame_skip=20)),
+        np.ones((2, 1)),
+        num_envs=2,
+        seed=0,
+    )
+    report = summarize(results)
+    assert 0 < report["mean_body_error"] < 0.5
+    assert "mean_root_drift" not in report and "speed_ratio" not in report

@@ -32,6 +32,24 @@ INSTABILITY = slice(
 MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
 
 
+def bodies_in_heading_frame(xpos: np.ndarray, xmat: np.ndarray, root: int) -> np.ndarray:
+    """Every body after `root` [B, 3] relative to the root, in the root's heading frame (the
+    root's x axis in the ground plane; yaw removed): what the body position error compares."""
+    fx, fy = xmat[root, 0], xmat[root, 3]
+    norm = float(np.hypot(fx, fy)) or 1.0
+    fx, fy = fx / norm, fy / norm
+    rel = xpos[root + 1 :] - xpos[root]
+    return np.column_stack(
+        [rel[:, 0] * fx + rel[:, 1] * fy, rel[:, 1] * fx - rel[:, 0] * fy, rel[:, 2]]
+    )
+
+
+def body_position_error(simulated: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
+    """(mean, max) distance (m) between bodies [B, 3] simulated and their reference."""
+    err = np.linalg.norm(simulated - reference, axis=1)
+    return float(err.mean()), float(err.max())
+
+
 @lru_cache(maxsize=1)
 def _size_names() -> tuple[str, ...]:
     model = mujoco.MjModel.from_xml_string("<mujoco/>")

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.characters.legs import leg_chains
-from paramimic.envs.core import EnvCore
+from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.envs.rewards import (
     WL19Terms,
@@ -199,18 +199,13 @@ class ParamEnv(EnvCore):
     def _bodies_in_heading_frame(self) -> np.ndarray:
         """Every body but the root [B, 3] relative to the root, in its heading frame (yaw
         removed), for the current kinematics."""
-        d, root = self.data, self.character.root_body_id
-        fx, fy = self._facing()
-        rel = d.xpos[root + 1 :] - d.xpos[root]
-        x, y = rel[:, 0] * fx + rel[:, 1] * fy, rel[:, 1] * fx - rel[:, 0] * fy
-        return np.column_stack([x, y, rel[:, 2]])
+        return bodies_in_heading_frame(self.data.xpos, self.data.xmat, self.character.root_body_id)
 
     def body_error(self) -> tuple[float, float]:
         """A clip gait's (mean, max) distance (m) between the bodies' simulated and reference
         positions, each relative to its own root in its own heading frame, at this phase."""
         ref = self._bodies_reference()[1:].reshape(-1, 3)
-        err = np.linalg.norm(self._bodies_in_heading_frame() - ref, axis=1)
-        return float(err.mean()), float(err.max())
+        return body_position_error(self._bodies_in_heading_frame(), ref)
 
     def root_drift(self) -> float:
         """A clip gait's horizontal distance (m) between the root and the reference root path:
@@ -573,6 +568,11 @@ class ParamEnv(EnvCore):
             layout += [("phase_sin_cos", 2), ("reference_pose_next", nj)]
             layout += [(f"reference_pose_{ahead:g}s", nj) for ahead in FUTURE_POSES]
         return [(name, size) for name, size in layout if size > 0]  # no task: no task segment
+
+    @property
+    def tracks_bodies(self) -> bool:
+        """Whether `body_error` has a reference: a clip gait's."""
+        return self._clip is not None
 
     @property
     def clip_speed(self) -> float | None:

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.config import ExperimentConfig
-from paramimic.envs.core import EnvCore
+from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
@@ -136,7 +136,7 @@ class SkillEnv(EnvCore):
         self._index_fall_geoms()
         dt = self.model.opt.timestep * self.frame_skip
         self._q0 = self._clip_qpos(c, np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt)
-        ee0, com0, low0 = self._kinematics(self._q0)
+        ee0, com0, low0, _ = self._kinematics(self._q0)
         self._feet = np.array(
             [list(c.definition.end_effectors).index(f) for f in c.definition.feet]
         )
@@ -153,20 +153,24 @@ class SkillEnv(EnvCore):
                 )
 
     def _kinematics(self, qpos: np.ndarray):
-        """World end-effectors [n, E, 3], COM [n, 3] and each foot's lowest point [n, F]."""
+        """World end-effectors [n, E, 3], COM [n, 3], each foot's lowest point [n, F] and the
+        bodies relative to the root in its heading frame [n, B, 3]."""
         m, d, c = self.model, self._scratch, self.character
+        root = c.root_body_id
         ee = np.empty((len(qpos), len(c.ee_site_ids), 3))
         com = np.empty((len(qpos), 3))
         feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
         low = np.empty((len(qpos), len(feet)))
+        bodies = np.empty((len(qpos), m.nbody - root - 1, 3))
         for i, row in enumerate(qpos):
             d.qpos[:] = row
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)
             ee[i] = d.site_xpos[c.ee_site_ids]
-            com[i] = d.subtree_com[c.root_body_id]
+            com[i] = d.subtree_com[root]
             low[i] = d.site_xpos[feet, 2].min(axis=1)
-        return ee, com, low
+            bodies[i] = bodies_in_heading_frame(d.xpos, d.xmat, root)
+        return ee, com, low, bodies
 
     def _clip_qpos(self, c: Body, times: np.ndarray) -> np.ndarray:
         """m0 at reference times (s) as qpos rows of body c: [n, nq]."""
@@ -248,8 +252,9 @@ class SkillEnv(EnvCore):
         )
         rn, nj = self.root_nv, self.nj
         qa = self._displaced(self._q0, rows[:, :rn], rows[:, rn : rn + nj])
-        ee, com, _ = self._kinematics(qa)
+        ee, com, _, bodies = self._kinematics(qa)
         self._qa = qa
+        self._bodies_a = bodies
         self._eea = ee - com[:, None, :]  # end-effectors relative to the COM
         self._coma = com
         self._tau_hat = np.clip(rows[:, -1], -TAU_LIMIT, TAU_LIMIT)
@@ -363,6 +368,16 @@ class SkillEnv(EnvCore):
             info["skill"] = self._held | {"held": not fell}
             return obs, reward, True, False, info
         return obs, reward, False, False, info
+
+    tracks_bodies = True  # `body_error` against m_a
+
+    def body_error(self) -> tuple[float, float]:
+        """(mean, max) distance (m) between the bodies' simulated positions and m_a's at φ
+        (after the clip's end, its last pose), each relative to its own root in its own
+        heading frame: the measure ParamEnv's clip gaits report."""
+        c, d = self.character, self.data
+        sim = bodies_in_heading_frame(d.xpos, d.xmat, c.root_body_id)
+        return body_position_error(sim, self._at(self._bodies_a, self._phi))
 
     # --- task parameters as measures ---------------------------------------------------------
 
