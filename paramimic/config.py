@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegativeFloat = Annotated[float, Field(ge=0)]
+PositiveInt = Annotated[int, Field(gt=0)]
 
 # Task goals and physical conditions understood by the environments besides the character's
 # shape parameters.
@@ -176,6 +177,22 @@ class SkillConfig(Section):
     )
 
 
+class HorizonGrowthConfig(Section):
+    """Training episodes' time limit grown from `start_seconds` to the env's own limit
+    (`max_episode_seconds`, or a skill's clip) over the first `samples` env steps, linearly
+    (DeepMimic's shipped walk grows its limit from 0.5 s to 20 s over 32M samples)."""
+
+    start_seconds: PositiveFloat = Field(0.5, description="the limit at the first update (s)")
+    samples: PositiveInt = Field(
+        32_000_000, description="env steps over which the limit reaches the env's own"
+    )
+
+    def seconds(self, samples_done: int, full: float) -> float:
+        """The limit (s) after `samples_done` env steps, for an env whose own limit is `full`."""
+        share = min(max(samples_done / self.samples, 0.0), 1.0)
+        return self.start_seconds + share * (full - self.start_seconds)
+
+
 class EnvConfig(Section):
     """Simulation, observation, reward and termination of ParamEnv."""
 
@@ -248,6 +265,11 @@ class EnvConfig(Section):
         "(1.0), so the policy does not know the body it controls (domain randomization: a "
         "study's control for [WL19]'s shape-aware policy)",
     )  # fmt: skip
+    horizon_growth: HorizonGrowthConfig | None = Field(
+        None, description="training only: episodes start short and their time limit grows to "
+        "the full horizon over the first samples (env steps counted as policy updates x "
+        "ppo.num_steps); None: every training episode has the full horizon",
+    )  # fmt: skip
     reward: RewardConfig = RewardConfig()
     clip: str | None = Field(
         None, description="imitate this clip in continuous time ([L21]); None: [WL19] gaits"
@@ -283,9 +305,10 @@ class EnvConfig(Section):
     def for_evaluation(self, max_episode_seconds: float | None = None) -> EnvConfig:
         """This section as evaluation, rendering and play run it: whole episodes, without the
         training devices that end an episode early (stall_speed_ratio, heading_error_limit,
-        deviation_limit), starting at uniform phases (a clip gait) or at the clip's start (a
-        skill: no RSI)."""
+        deviation_limit, horizon_growth), starting at uniform phases (a clip gait) or at the
+        clip's start (a skill: no RSI)."""
         update = {"stall_speed_ratio": None, "heading_error_limit": None, "deviation_limit": None}
+        update["horizon_growth"] = None
         update["phase_sampling"] = "uniform"
         update["skill"] = self.skill.model_copy(update={"rsi": 0.0})
         if max_episode_seconds is not None:

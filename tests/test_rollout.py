@@ -1,6 +1,8 @@
 import numpy as np
+import pytest
 import torch
 
+from paramimic.config import EnvConfig, HorizonGrowthConfig
 from paramimic.envs import ParamEnv
 from paramimic.rl.networks import ActorCritic
 from paramimic.rl.rollout import RolloutWorker
@@ -65,3 +67,32 @@ def test_same_seed_same_fragment():
     np.testing.assert_array_equal(a.obs, b.obs)
     np.testing.assert_array_equal(a.actions, b.actions)
     np.testing.assert_array_equal(a.tasks, b.tasks)
+
+
+def test_horizon_growth_sets_the_training_time_limit_by_policy_version():
+    """env.horizon_growth: the limit goes linearly from start_seconds to the env's own over
+    `samples` env steps, one policy version counting ppo.num_steps of them; evaluation is
+    without it."""
+    growth = HorizonGrowthConfig(start_seconds=0.2, samples=1000)
+    assert growth.seconds(0, 1.0) == 0.2
+    assert growth.seconds(500, 1.0) == pytest.approx(0.6)
+    assert growth.seconds(5000, 1.0) == 1.0
+    cfg = {"max_episode_seconds": 1.0}
+    probe = ParamEnv("walker", TASK, config=cfg)
+    assert probe.horizon_seconds == pytest.approx(1.0)
+    w = RolloutWorker(
+        lambda: ParamEnv("walker", TASK, config=cfg),
+        num_envs=2,
+        obs_dim=probe.observation_space.shape[0],
+        act_dim=probe.action_space.shape[0],
+        seed=0,
+        horizon=(growth, 100),  # a version stands for 100 env steps
+    )
+    policy = ActorCritic(probe.observation_space.shape[0], probe.action_space.shape[0], (16,), -2.0)
+    lengths = {}
+    for version in (0, 5, 10):  # 0.2 s, 0.6 s, 1.0 s: 6, 18 and 30 control steps at 30 Hz
+        w.set_weights(policy.state_dict(), version)
+        f = w.collect(100)
+        lengths[version] = {e.length for e in f.episodes[1:] if not e.ended_early}
+    assert lengths[0] == {6} and lengths[5] == {18} and lengths[10] == {30}
+    assert EnvConfig(horizon_growth={"samples": 10}).for_evaluation().horizon_growth is None

@@ -379,3 +379,18 @@ def test_evaluation_reports_a_skills_body_error_and_no_root_path():
     report = summarize(results)
     assert 0 < report["mean_body_error"] < 0.5
     assert "mean_root_drift" not in report and "speed_ratio" not in report
+
+
+def test_a_training_time_limit_truncates_a_skill_and_its_stand():
+    cfg = EnvConfig(clip="humanoid_jump", frame_skip=20, skill={"hold_seconds": 1.0})
+    env = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, cfg)
+    assert env.horizon_seconds == pytest.approx(env.clip.duration + 1.0, abs=env.dt)
+    zero = np.zeros(env.action_space.shape)
+    env.set_time_limit(0.3)  # 9 control steps: mid-clip
+    rows = _run(env, lambda i: zero)
+    assert len(rows) == 9
+    _, te, tr, info = rows[-1]
+    assert tr and not te and not info["fell"]
+    assert info["skill"]["completed"] is False
+    env.set_time_limit(None)
+    assert len(_run(env, lambda i: zero)) > 9  # the env's own end again

@@ -122,11 +122,20 @@ class EnvCore(gym.Env, ABC):
         self._base_data = mujoco.MjData(self._base.model)
         self.character: Body | None = None
         self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
+        self._time_limit: int | None = None  # control steps; set_time_limit
         self._setup()
 
     @abstractmethod
     def _setup(self) -> None:
         """The subclass's own set-up: reference motion, spaces, reward weights."""
+
+    def set_time_limit(self, seconds: float | None) -> None:
+        """Episodes from now on end (truncated) after `seconds` if that comes before the env's
+        own end (`env.horizon_growth` during training); None: the env's own limit only."""
+        self._time_limit = None if seconds is None else max(1, int(round(seconds / self.dt)))
+
+    def _timed_out(self) -> bool:
+        return self._time_limit is not None and self._steps >= self._time_limit
 
     def goal_index(self, name: str) -> int | None:
         """The task dimension of a goal or condition, None when the task space has none."""

@@ -379,7 +379,7 @@ class ParamEnv(EnvCore):
         off_course = not (fell or stalled) and self._off_course()
         deviated = not (fell or stalled or off_course) and self._deviated()
         ended = fell or stalled or off_course or deviated
-        truncated = self._steps >= self._max_steps and not ended
+        truncated = (self._steps >= self._max_steps or self._timed_out()) and not ended
         if self._phases is not None and (ended or truncated):
             self._phases.update(self._phase0, failed=fell or deviated)
         info = {
@@ -579,6 +579,11 @@ class ParamEnv(EnvCore):
         """A clip gait's speed on this body (m/s; the clip's root path scaled by the body's hip
         height); None for a procedural gait."""
         return self._gait.speed if self._clip is not None else None
+
+    @property
+    def horizon_seconds(self) -> float:
+        """The env's own episode limit (s)."""
+        return self._max_steps * self.dt
 
     @property
     def sim_time(self) -> float:

@@ -343,7 +343,7 @@ class SkillEnv(EnvCore):
         terms.append(0.0 if r_task is None else r_task)
         if self._held is not None or completed and self._hold_steps:  # standing after the end
             return self._hold(obs, reward + spike, spike, dphi, terms, fell, completed)
-        if fell or completed or self._steps >= self._max_steps:
+        if fell or completed or self._steps >= self._max_steps or self._timed_out():
             return self._end(
                 obs,
                 reward + spike,
@@ -359,15 +359,22 @@ class SkillEnv(EnvCore):
 
     def _hold(self, obs, reward, spike, dphi, terms, fell, completed):
         """`hold_seconds` after the clip's end: the summary is the clip end's; the episode ends
-        on a fall or when the time is up, reporting whether the body stood."""
+        on a fall or when the time is up, reporting whether the body stood the whole time (a
+        training time limit that cuts the stand short truncates it: not `held`)."""
         if completed:
             self._held, self._hold_left = self._summary(True), self._hold_steps
         self._hold_left -= 0 if completed else 1
         info = self._info(dphi, spike, terms, fell=fell)
-        if fell or self._hold_left <= 0 or self._steps >= self._max_steps:
-            info["skill"] = self._held | {"held": not fell}
-            return obs, reward, True, False, info
+        cut = not fell and self._hold_left > 0 and self._timed_out()
+        if fell or cut or self._hold_left <= 0 or self._steps >= self._max_steps:
+            info["skill"] = self._held | {"held": not (fell or cut)}
+            return obs, reward, not cut, cut, info
         return obs, reward, False, False, info
+
+    @property
+    def horizon_seconds(self) -> float:
+        """The episode's nominal length (s): the clip at its own pace and the stand after it."""
+        return (self.length + self._hold_steps) * self.dt
 
     tracks_bodies = True  # `body_error` against m_a
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from paramimic.config import ActorsConfig
+from paramimic.config import ActorsConfig, HorizonGrowthConfig
 from paramimic.envs import ParamEnv
 from paramimic.rl.numpy_mlp import NumpyPolicy
 
@@ -39,6 +39,12 @@ class TaskQueue:
         self.next += n
         motions = None if self.motions is None else self.motions[idx]
         return {"tasks": self.tasks[idx], "motions": motions, **self.tags}
+
+
+def horizon_of(cfg) -> tuple[HorizonGrowthConfig, int] | None:
+    """A RolloutWorker's `horizon` for an experiment config (`cfg`: an ExperimentConfig)."""
+    growth = cfg.env.horizon_growth
+    return None if growth is None else (growth, cfg.ppo.num_steps)
 
 
 def tasks_per_fragment(num_envs: int, num_steps: int) -> int:
@@ -123,8 +129,12 @@ class RolloutWorker:
         worker_id: int = 0,
         task_source: TaskSource | None = None,
         id_prefix: str = "",
+        horizon: tuple[HorizonGrowthConfig, int] | None = None,
     ) -> None:
+        """`horizon`: env.horizon_growth and the env steps one policy version stands for
+        (ppo.num_steps): each new version sets the envs' training time limit."""
         self.envs = [make_env() for _ in range(num_envs)]
+        self.horizon = horizon
         self.obs_dim, self.act_dim = obs_dim, act_dim
         self.fast_policy: NumpyPolicy | None = None  # until the first weights arrive
         self.policy_version = -1
@@ -142,6 +152,11 @@ class RolloutWorker:
         if version != self.policy_version:
             self.fast_policy = NumpyPolicy({k: np.asarray(v) for k, v in weights.items()})
             self.policy_version = version
+            if self.horizon is not None:
+                growth, samples_per_version = self.horizon
+                for env in self.envs:
+                    full = env.horizon_seconds
+                    env.set_time_limit(growth.seconds(version * samples_per_version, full))
 
     def _tasks(self, n: int) -> list[dict] | None:
         """Reset options of the next n episodes: task, motion (if any) and the deal's tags."""

@@ -20,7 +20,7 @@ from ray.exceptions import GetTimeoutError, RayActorError
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
-from paramimic.rl.rollout import Fragment, RolloutWorker
+from paramimic.rl.rollout import Fragment, RolloutWorker, horizon_of
 from services.keys import RAY_NAMESPACE, SamplerUnavailable
 
 
@@ -53,6 +53,7 @@ class RolloutActor:
             worker_id=worker_id,
             # episode ids stay unique across restarts and resumed runs (the sampler dedupes by id)
             id_prefix=os.urandom(4).hex() + "-",
+            horizon=horizon_of(cfg),
         )
 
     def pid(self) -> int:

@@ -33,6 +33,7 @@ from paramimic.rl.rollout import (
     EpisodeSummary,
     Fragment,
     RolloutWorker,
+    horizon_of,
     steps_per_fragment,
     tasks_per_fragment,
 )
@@ -108,6 +109,7 @@ class SerialBackend:
             act_dim,
             seed=cfg.train.seed + 1,
             worker_id=0,
+            horizon=horizon_of(cfg),
         )
 
     def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]:
