@@ -169,8 +169,8 @@ def evaluate_skill(run: Path, tries: int) -> dict:
             if te or tr:
                 break
         traj = env.episode_trajectory()
-        skill = info.get("skill", {})
-        stood = bool(skill.get("completed") and skill.get("held"))
+        skill = info.get("skill")
+        stood = skill is not None and skill.completed and bool(skill.held)
         rise = com_rise(traj)
         angle = float(rotation_steps(traj).sum(axis=0) @ axis) if len(traj) > 1 else 0.0
         error = float(np.mean(errors)) if errors else float("inf")

@@ -93,7 +93,7 @@ def run_episodes(
                     bool(info["fell"] or info["diverged"]),  # a completed clip also terminates
                     float(env.data.qpos[0]) - s["x0"],
                     s["len"] * env.dt,
-                    info["skill"]["fitness"] if "skill" in info else None,
+                    info["skill"].fitness if "skill" in info else None,
                     s["error"] / s["len"] if bodies else None,
                     s["drift"] / s["len"] if path else None,
                     env.clip_speed if path else None,

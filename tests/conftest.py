@@ -151,7 +151,7 @@ def skill_run(redis_server, tmp_path_factory):
         task_source=lambda n: sampler.next_deal(n, "test"),
     )
     fragment = worker.collect(250, use_policy=False)  # zero actions: m0's PD targets
-    sampler.ingest([e.to_dict() for e in fragment.episodes])
+    sampler.ingest(fragment.episodes)
     assert len(sampler.curriculum.elites) >= 3
     return run_id
 

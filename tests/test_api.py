@@ -13,6 +13,7 @@ import pytest
 from conftest import API_TOKEN as TOKEN
 
 from paramimic.config import ExperimentConfig
+from paramimic.messages import EpisodeReport
 from services.launch.api_process import ApiProcess
 from services.launch.processes import free_port
 from services.learner.reporter import RunReporter
@@ -56,17 +57,9 @@ def run(redis_server, tmp_path_factory):
         sampler.update_marginal(layers, 4.0, it, refill=True)
         sampler.ingest(
             [
-                {
-                    "episode_id": f"e{it}-{j}",
-                    "task": [1, 1, 1],
-                    "return": 10.0 * it,
-                    "length": 30,
-                    "fell": j == 0,
-                    "diverged": False,
-                    "reward_terms": {},
-                }
+                EpisodeReport(f"e{it}-{j}", np.ones(3), 10.0 * it, 30, j == 0, False, {}, j == 0)
                 for j in range(2)
-            ]  # fmt: skip
+            ]
         )
         reporter.progress(
             {

@@ -5,6 +5,7 @@ import pytest
 
 from paramimic.config import ExperimentConfig
 from paramimic.curriculum.adaptive import AdaptiveCurriculum, marginal_function
+from paramimic.messages import EpisodeReport
 
 
 def _curriculum(task: dict) -> AdaptiveCurriculum:
@@ -26,7 +27,7 @@ def test_state_round_trips_part_by_part():
     a = _curriculum(TWO)
     a.update_marginal(_layers(3), mu=3.0, iteration=4, refill=True)
     a.next_tasks(5)
-    a.ingest([{"length": 10, "fell": True, "diverged": False, "return": 2.5}])
+    a.ingest([_episode(fell=True, ret=2.5)])
     b = _curriculum(TWO)
     b.from_state(a.to_state())
     assert b.to_state() == a.to_state()
@@ -75,20 +76,15 @@ def _widening(**widen) -> AdaptiveCurriculum:
     return AdaptiveCurriculum.from_config(cfg)
 
 
-def _episodes(n: int, falls: int, early_ends: int | None = None) -> list[dict]:
+def _episode(i: int = 0, fell: bool = False, ended_early: bool = False, ret: float = 1.0):
+    return EpisodeReport(f"e{i}", np.ones(3), ret, 10, fell, False, {}, ended_early or fell)
+
+
+def _episodes(n: int, falls: int, early_ends: int | None = None) -> list[EpisodeReport]:
     """n episodes, the first `falls` fell, the first `early_ends` (default: the falls) ended
     early (a fall or another early end: stalled, off course)."""
     early = falls if early_ends is None else early_ends
-    return [
-        {
-            "length": 10,
-            "fell": i < falls,
-            "ended_early": i < early,
-            "diverged": False,
-            "return": 1.0,
-        }
-        for i in range(n)
-    ]
+    return [_episode(i, i < falls, i < early) for i in range(n)]
 
 
 def test_a_widening_range_starts_at_the_centre_and_grows_when_mastered():

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # The library's layers, bottom up: a module imports only from its own layer or below.
 LAYERS = [
-    ("paramimic.task_space", "paramimic.motion"),
+    ("paramimic.messages", "paramimic.task_space", "paramimic.motion"),
     ("paramimic.characters",),
     ("paramimic.config",),
     ("paramimic.envs",),

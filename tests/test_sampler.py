@@ -17,6 +17,7 @@ import redis
 from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
+from paramimic.messages import EpisodeReport
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
@@ -38,16 +39,8 @@ def _cfg(**actors) -> ExperimentConfig:
     return ExperimentConfig.model_validate({**CFG, "actors": {**CFG["actors"], **actors}})
 
 
-def _episode(i: int, ret: float = 10.0) -> dict:
-    return {
-        "episode_id": f"ep-{i}",
-        "task": [1.0, 1.0, 1.0],
-        "return": ret,
-        "length": 50,
-        "fell": i % 2 == 0,
-        "diverged": False,
-        "reward_terms": {},
-    }
+def _episode(i: int, ret: float = 10.0) -> EpisodeReport:
+    return EpisodeReport(f"ep-{i}", np.ones(3), ret, 50, i % 2 == 0, False, {}, i % 2 == 0)
 
 
 def _layers(seed: int = 0) -> list:

@@ -11,6 +11,7 @@ from paramimic.curriculum.bootstrap import Bootstrap
 from paramimic.curriculum.density import SURROUNDING, VISITED
 from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import SkillCurriculum
+from paramimic.messages import DealTags, EpisodeReport, SkillOutcome
 from paramimic.task_space import TaskSpace
 
 SPACE = TaskSpace.from_ranges({"gravity": (0.0, 1.0), "jump_height": (0.0, 1.0)})
@@ -23,19 +24,19 @@ def make(**skill) -> SkillCurriculum:
 
 
 def episode(i, achieved, fitness, batch=None, trace_value=None):
-    trace = None if trace_value is None else np.full(SHAPE, trace_value).tolist()
-    return {
-        "episode_id": f"e{i}",
-        "task": list(achieved),
-        "return": 1.0,
-        "length": 10,
-        "fell": False,
-        "diverged": False,
-        "achieved": list(achieved),
-        "fitness": fitness,
-        "trace": trace,
-        "batch": batch,
-    }
+    trace = None if trace_value is None else np.full(SHAPE, trace_value)
+    return EpisodeReport(
+        f"e{i}",
+        np.asarray(achieved, float),
+        1.0,
+        10,
+        fell=False,
+        diverged=False,
+        reward_terms={},
+        ended_early=False,
+        skill=SkillOutcome(np.asarray(achieved, float), fitness, trace, trace is not None),
+        tags=DealTags(batch=batch),
+    )
 
 
 def test_elites_keep_their_traces_and_replace_worse_neighbours():
@@ -58,15 +59,15 @@ def test_elites_keep_their_traces_and_replace_worse_neighbours():
 def test_motions_follow_the_bootstrap_stage():
     c = make(batch_size=4, episodes_per_param=1)
     deal = c.next_deal(3)
-    assert deal["region"] == "reference" and deal["motions"] is None
-    assert deal["tasks"].tolist() == [[0.5, 0.5]] * 3  # π0 trains at a0 on m0
+    assert deal.region == "reference" and deal.motions is None
+    assert deal.tasks.tolist() == [[0.5, 0.5]] * 3  # π0 trains at a0 on m0
     c.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0)])
     c.ingest([episode(1, (0.8, 0.5), 0.9, trace_value=3.0)])
     c.update_motion(None, 0, None, "proxy")
     deal = c.next_deal(4)
     # kNN proxy (Eq. 14) between the two elites: a convex mix of 1.0 and 3.0
-    assert deal["motions"].shape == (4, *SHAPE)
-    assert np.all((deal["motions"] >= 1.0) & (deal["motions"] <= 3.0))
+    assert deal.motions.shape == (4, *SHAPE)
+    assert np.all((deal.motions >= 1.0) & (deal.motions <= 3.0))
     net = ParameterizationNet(SPACE, SHAPE, hidden=(8,), seed=0)
     net.fit(*c.elite_data(), steps=5)
     with pytest.raises(ValueError, match="stage must be"):
@@ -86,38 +87,38 @@ def test_batches_measure_exploration_rates_and_switch_phases():
         c.ingest([episode(100 + i, (g, 0.5), 0.5, trace_value=0.0)])
     c.update_motion(None, 0, None, "proxy")
     deal = c.next_deal(10)  # batch 1: exploration draws from A_s
-    assert deal["region"] == SURROUNDING
-    rho = c.density(deal["tasks"])
+    assert deal.region == SURROUNDING
+    rho = c.density(deal.tasks)
     assert np.all((rho >= 0.2) & (rho < 0.8))
     # its 10 episodes find new elites far apart: the exploration rate in A_s is 1
-    eps = [episode(i, (0.105 * i, 0.95), 0.9, deal["batch"], 1.0) for i in range(10)]
+    eps = [episode(i, (0.105 * i, 0.95), 0.9, deal.batch, 1.0) for i in range(10)]
     c.ingest(eps)
     assert c.phase.rate_surrounding == pytest.approx(1.0)
     # late episodes of the closed batch (dealt ahead) change neither rates nor the history
     c.ingest([episode(200 + i, (0.5, 0.5), 0.1, 1, 1.0) for i in range(3)])
     assert c.phase.rate_surrounding == 1.0 and len(c.history) == 1
     deal = c.next_deal(10)  # batch 2: the occasional probe of A_h
-    assert deal["region"] == VISITED
-    assert np.all(c.density(deal["tasks"]) >= 0.8)
+    assert deal.region == VISITED
+    assert np.all(c.density(deal.tasks) >= 0.8)
     # nothing improves there: rate 0 in A_h; A_s (1.0) > A_h (0.0): exploration goes on
-    c.ingest([episode(20 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    c.ingest([episode(20 + i, (0.5, 0.5), 0.1, deal.batch, 1.0) for i in range(10)])
     assert c.phase.rate_visited == 0.0 and c.phase.phase == "exploration"
     deal = c.next_deal(10)  # batch 3: A_s again, now without improvements
-    c.ingest([episode(40 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    c.ingest([episode(40 + i, (0.5, 0.5), 0.1, deal.batch, 1.0) for i in range(10)])
     deal = c.next_deal(10)  # batch 4: the probe of A_h finds improvements (EMA 0.5 each)
-    assert deal["region"] == VISITED
-    eps = [episode(60 + i, (0.105 * i, 0.05), 0.95, deal["batch"], 1.0) for i in range(10)]
+    assert deal.region == VISITED
+    eps = [episode(60 + i, (0.105 * i, 0.05), 0.95, deal.batch, 1.0) for i in range(10)]
     c.ingest(eps)
     assert c.phase.rate_visited == c.phase.rate_surrounding == 0.5
     assert c.phase.phase == "exploration"
     deal = c.next_deal(10)  # batch 5: A_s without improvements: 0.25 < 0.5, refinement
-    assert deal["region"] == SURROUNDING
-    c.ingest([episode(80 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
+    assert deal.region == SURROUNDING
+    c.ingest([episode(80 + i, (0.5, 0.5), 0.1, deal.batch, 1.0) for i in range(10)])
     assert c.phase.phase == "refinement" and c.phase.switches == 1
     deal = c.next_deal(10)  # batch 6: in refinement the occasional probe is of A_s
-    assert deal["region"] == SURROUNDING
-    c.ingest([episode(90 + i, (0.5, 0.5), 0.1, deal["batch"], 1.0) for i in range(10)])
-    assert c.next_deal(1)["region"] == VISITED  # batch 7: refinement draws from A_h
+    assert deal.region == SURROUNDING
+    c.ingest([episode(90 + i, (0.5, 0.5), 0.1, deal.batch, 1.0) for i in range(10)])
+    assert c.next_deal(1).region == VISITED  # batch 7: refinement draws from A_h
     s = c.summary()
     assert s["phase"] == "refinement" and s["explored_ratio"] > 0
     assert [h["episodes"] for h in s["history"]] == [16, 29, 39, 49, 59, 69]
@@ -125,10 +126,10 @@ def test_batches_measure_exploration_rates_and_switch_phases():
 
 def test_uniform_sampling_is_the_baseline():
     c = make(sampling="uniform", batch_size=50, episodes_per_param=1)
-    assert c.next_deal(50)["region"] == "reference"  # π0 first, as in the curriculum
+    assert c.next_deal(50).region == "reference"  # π0 first, as in the curriculum
     c.ingest([episode(i, (0.5, 0.5), 0.5, 1, 1.0) for i in range(50)])
     c.update_motion(None, 0, None, "proxy")
-    tasks = c.next_deal(50)["tasks"]
+    tasks = c.next_deal(50).tasks
     assert c.summary()["phase"] == "uniform"
     assert tasks.min(axis=0) == pytest.approx([0, 0], abs=0.1)
     assert tasks.max(axis=0) == pytest.approx([1, 1], abs=0.1)
@@ -144,8 +145,8 @@ def test_state_round_trip_continues_exactly():
     twin = make(batch_size=3, episodes_per_param=1)
     twin.from_state(state)
     assert json.dumps(twin.to_state(), sort_keys=True) == json.dumps(state, sort_keys=True)
-    assert np.array_equal(twin.next_deal(5)["tasks"], c.next_deal(5)["tasks"])
-    assert np.allclose(twin.next_deal(2)["motions"], c.next_deal(2)["motions"])
+    assert np.array_equal(twin.next_deal(5).tasks, c.next_deal(5).tasks)
+    assert np.allclose(twin.next_deal(2).motions, c.next_deal(2).motions)
 
 
 def test_bootstrap_stages():

@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 from paramimic.config import EnvConfig, SkillConfig
 from paramimic.envs import make_env
 from paramimic.envs.skill_env import SkillEnv
+from paramimic.messages import SkillOutcome
 
 TASK = {"gravity": (0.2, 1.65), "jump_height": (0.0, 0.6)}
 
@@ -86,14 +87,14 @@ def test_a_completed_episode_reports_trace_hindsight_fitness_and_the_spike(env):
     assert te and not tr and not info["fell"]
     assert len(rows) == pytest.approx(env.length / np.exp(tau), abs=1.5)
     skill = info["skill"]
-    assert skill["completed"] and 0.1 < skill["fitness"] <= 1.0 + 0.1
-    trace = skill["trace"]
+    assert skill.completed and 0.1 < skill.fitness <= 1.0 + 0.1
+    trace = skill.trace
     assert trace.shape == env.trace_shape
     assert trace[:, env.root_nv : env.root_nv + env.nj] == pytest.approx(np.tile(d, (16, 1)))
     assert trace[:, -1] == pytest.approx(tau)
     # hindsight: a' keeps gravity and takes the jump height the episode reached
-    assert skill["achieved"][0] == 1.0
-    assert skill["achieved"][1] == pytest.approx(np.clip(env.jump_height(), 0.0, 0.6))
+    assert skill.achieved[0] == 1.0
+    assert skill.achieved[1] == pytest.approx(np.clip(env.jump_height(), 0.0, 0.6))
     # Eq. 8 spike with w_task = 10 when the clip ends, nothing before
     expected = 10.0 * np.exp(-((env.jump_height() - 0.3) ** 2) / 0.1**2)
     assert info["reward_spike"] == pytest.approx(expected)
@@ -109,9 +110,9 @@ def test_tracking_m0_scores_higher_fitness_than_flailing(env):
         rows = _run(
             env, lambda t: np.append(rng.uniform(-1, 1, env.nj), 0.0), {"task": [1.0, 0.14]}, seed
         )
-        wild.append(rows[-1][3]["skill"]["fitness"])
-    assert calm["fitness"] > 0.5
-    assert max(wild) < calm["fitness"]
+        wild.append(rows[-1][3]["skill"].fitness)
+    assert calm.fitness > 0.5
+    assert max(wild) < calm.fitness
 
 
 def test_gravity_is_per_env_and_changes_the_flight(env):
@@ -132,10 +133,10 @@ def test_divergence_and_falls_end_the_episode(env):
     env.data.qvel[:] = 1e5
     _, r, te, _, info = env.step(np.zeros(env.nj + 1))
     assert te and info["diverged"] and r == 0.0
-    assert info["skill"]["fitness"] == 0.0 and info["skill"]["trace"] is None
+    assert info["skill"].fitness == 0.0 and info["skill"].trace is None
     rows = _run(env, lambda t: np.append(np.full(env.nj, -1.0), 0.0), {"task": [1.0, 0.14]})
     assert rows[-1][3]["fell"] and rows[-1][1]
-    assert rows[-1][3]["skill"]["fitness"] == 0.0
+    assert rows[-1][3]["skill"].fitness == 0.0
 
 
 def test_humanoid_servos_hold_the_first_frame_of_the_jump():
@@ -226,7 +227,7 @@ def test_declared_measures_pay_their_rewards_and_relabel_by_the_same_measure():
         tracking = rows[i][0] - rows[i][3]["reward_spike"] - 0.1 * r_task
         assert 0.0 <= tracking <= 0.9 + 1e-9
     # hindsight: a' by the same measures on the whole episode, clipped into the box
-    achieved = rows[-1][3]["skill"]["achieved"]
+    achieved = rows[-1][3]["skill"].achieved
     assert achieved[1] == pytest.approx(np.clip(e_off, 0.5, 2.0))
     assert achieved[2] == pytest.approx(np.clip(traj.end_effectors["foot_r"][:, 2].max(), 0.1, 0.4))
 
@@ -241,14 +242,14 @@ def test_a_zero_range_measure_is_a_constraint_in_the_fitness():
                      EnvConfig(clip="planar_jump", skill={"measures": measures}))  # fmt: skip
     f0 = _run(base, lambda t: np.zeros(base.nj + 1), {"task": [1.0]})[-1][3]["skill"]
     f1 = _run(fixed, lambda t: np.zeros(fixed.nj + 1), {"task": [1.0, 0.0]})[-1][3]["skill"]
-    assert f0["completed"] and f1["completed"]
+    assert f0.completed and f1.completed
     # the untrained walker's torso pitches forward by about 1 rad on the way (0.15 turns)
     turned = fixed.measure(fixed.measured[0])
     pitch = np.arctan2(-fixed.data.xmat[fixed.character.root_body_id][6],
                        fixed.data.xmat[fixed.character.root_body_id][8])  # fmt: skip
     assert turned == pytest.approx(abs(pitch) / (2 * np.pi), abs=0.01)
     # W_CONSTRAINT 0.1 x exp(-(turned / 0.5)²)
-    assert f1["fitness"] - f0["fitness"] == pytest.approx(0.1 * np.exp(-((turned / 0.5) ** 2)))
+    assert f1.fitness - f0.fitness == pytest.approx(0.1 * np.exp(-((turned / 0.5) ** 2)))
 
 
 def test_a_reference_unit_needs_a_measure_the_clip_has():
@@ -291,7 +292,7 @@ def test_rsi_starts_pi0_episodes_mid_clip_in_the_clips_pose_and_velocity():
         assert info["reward_terms"]["task"] == 0.0
         if term or trunc:
             break
-    assert info["skill"] == {"achieved": None, "fitness": 0.0, "trace": None, "completed": False}
+    assert info["skill"] == SkillOutcome(None, 0.0, None, False)
     # a motion trace (P_θ's m_a, past π0) or evaluation: the clip's start, as [L21]
     env.reset(seed=0, options={"motion": np.zeros(env.trace_shape)})
     assert env._phi == 0.0
@@ -308,7 +309,7 @@ def test_hold_seconds_goes_on_past_the_clips_end_and_says_whether_the_body_stood
     zero = np.zeros(plain.action_space.shape)
     rows = _run(plain, lambda t: zero, {"task": [1.0, 0.3]})
     ends = len(rows)
-    assert rows[-1][3]["skill"]["completed"] and not rows[-1][3]["fell"]
+    assert rows[-1][3]["skill"].completed and not rows[-1][3]["fell"]
     rows_held = _run(held, lambda t: zero, {"task": [1.0, 0.3]})
     end = rows_held[ends - 1][3]  # the same step: the clip ends, the episode does not
     assert not (rows_held[ends - 1][1] or rows_held[ends - 1][2]) and "skill" not in end
@@ -317,8 +318,8 @@ def test_hold_seconds_goes_on_past_the_clips_end_and_says_whether_the_body_stood
     assert te and not tr
     skill = info["skill"]
     for key in ("achieved", "fitness", "completed"):
-        assert skill[key] == pytest.approx(rows[-1][3]["skill"][key])
-    if skill["held"]:  # stood: 30 more control steps (1 s at 30 Hz)
+        assert getattr(skill, key) == pytest.approx(getattr(rows[-1][3]["skill"], key))
+    if skill.held:  # stood: 30 more control steps (1 s at 30 Hz)
         assert len(rows_held) == ends + 30 and not info["fell"]
     else:  # fell while holding
         assert len(rows_held) < ends + 30 and info["fell"]
@@ -391,6 +392,6 @@ def test_a_training_time_limit_truncates_a_skill_and_its_stand():
     assert len(rows) == 9
     _, te, tr, info = rows[-1]
     assert tr and not te and not info["fell"]
-    assert info["skill"]["completed"] is False
+    assert info["skill"].completed is False
     env.set_time_limit(None)
     assert len(_run(env, lambda i: zero)) > 9  # the env's own end again

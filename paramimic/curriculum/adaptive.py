@@ -11,6 +11,7 @@ import numpy as np
 
 from paramimic.config import CurriculumConfig, ExperimentConfig
 from paramimic.curriculum.mcmc import AdaptiveSampler
+from paramimic.messages import EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
@@ -91,32 +92,31 @@ class AdaptiveCurriculum:
         self.stats["batches"] += 1
         return tasks
 
-    def next_deal(self, n: int) -> dict:
+    def next_deal(self, n: int) -> TaskDeal:
         """The tasks of n episodes as a deal (the [L21] curriculum adds motions and tags)."""
-        return {"tasks": self.next_tasks(n)}
+        return TaskDeal(self.next_tasks(n))
 
-    def ingest(self, episodes: Iterable[dict]) -> int:
-        """Count finished episodes (EpisodeSummary.to_dict()); the caller removes duplicates."""
+    def ingest(self, episodes: Iterable[EpisodeReport]) -> int:
+        """Count finished episodes; the caller removes duplicates."""
         n = 0
         for e in episodes:
             n += 1
             self.stats["episodes"] += 1
-            self.stats["steps"] += int(e["length"])
-            self.stats["falls"] += int(bool(e["fell"]))
-            self.stats["diverged"] += int(bool(e["diverged"]))
-            self.stats["return_sum"] += float(e["return"])
+            self.stats["steps"] += int(e.length)
+            self.stats["falls"] += int(e.fell)
+            self.stats["diverged"] += int(e.diverged)
+            self.stats["return_sum"] += float(e.ret)
             self._widen(e)
         return n
 
-    def _widen(self, episode: dict) -> None:
+    def _widen(self, episode: EpisodeReport) -> None:
         """Count a training episode toward the next widening decision (`WidenConfig`)."""
         rule = self.config.widen
         if rule is None or rule.promote_on == "edge" or self.width >= 1.0:
             return
         self.window[0] += 1
-        self.window[1] += int(
-            bool(episode["ended_early" if rule.promote_on == "early_ends" else "fell"])
-        )
+        failed = episode.ended_early if rule.promote_on == "early_ends" else episode.fell
+        self.window[1] += int(failed)
         if self.window[0] >= rule.window:
             self._promote(*self.window)
             self.window = [0, 0]

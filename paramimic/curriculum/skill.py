@@ -33,6 +33,7 @@ from paramimic.curriculum.density import (
 from paramimic.curriculum.elite_set import EliteRule, EliteSet, Offer
 from paramimic.curriculum.knn_proxy import knn_proxy
 from paramimic.curriculum.mcmc import metropolis_hastings, surrogate_log_density
+from paramimic.messages import EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
@@ -122,11 +123,11 @@ class SkillCurriculum(AdaptiveCurriculum):
     # --- dealing tasks ------------------------------------------------------------------------
 
     def next_tasks(self, n: int) -> np.ndarray:
-        return self.next_deal(n)["tasks"]
+        return self.next_deal(n).tasks
 
-    def next_deal(self, n: int) -> dict:
-        """n tasks from the current batch with the motions m_a to imitate: {tasks [n, d],
-        motions [n, K, D] or None (m0), batch, region, motion_version}."""
+    def next_deal(self, n: int) -> TaskDeal:
+        """n tasks from the current batch with the motions m_a to imitate (None: m0), tagged
+        with the batch, its region and the motion version."""
         quota = self.sc.batch_size * self.sc.episodes_per_param
         current = None if self.batch is None else self.batches.get(self.batch["id"])
         if current is None or current["ingested"] >= quota:
@@ -137,13 +138,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         tasks = np.asarray(b["params"])[idx]
         self.stats["tasks_served"] += n
         self.stats["batches"] += 1
-        return {
-            "tasks": tasks,
-            "motions": self.motions_for(tasks),
-            "batch": b["id"],
-            "region": b["region"],
-            "motion_version": self.motion_version,
-        }
+        return TaskDeal(tasks, self.motions_for(tasks), b["id"], b["region"], self.motion_version)
 
     def _new_batch(self) -> None:
         sc, rng, B = self.sc, self.rng, self.sc.batch_size
@@ -213,34 +208,36 @@ class SkillCurriculum(AdaptiveCurriculum):
 
     # --- what finished episodes report ---------------------------------------------------------
 
-    def ingest(self, episodes: Iterable[dict]) -> int:
+    def ingest(self, episodes: Iterable[EpisodeReport]) -> int:
         """Count episodes and offer each with a trace to the elite set at its achieved a'."""
         episodes = list(episodes)
         n = super().ingest(episodes)
         changed = False
         for e in episodes:
-            if e.get("achieved") is not None:
-                self.achieved.append([float(x) for x in e["achieved"]])
+            skill = e.skill
+            if skill is not None and skill.achieved is not None:
+                self.achieved.append([float(x) for x in skill.achieved])
             offer = Offer(False)
-            if e.get("trace") is not None and e.get("achieved") is not None:
+            if skill is not None and skill.trace is not None and skill.achieved is not None:
                 offer = self.elites.offer(
-                    np.asarray(e["achieved"], np.float64), float(e["fitness"]), e["episode_id"]
+                    np.asarray(skill.achieved, np.float64), float(skill.fitness), e.episode_id
                 )
             if offer.accepted:
                 changed = True
-                key = e["episode_id"]
-                self.traces[key] = self.added[key] = np.asarray(e["trace"], np.float64)
+                key = e.episode_id
+                self.traces[key] = self.added[key] = np.asarray(skill.trace, np.float64)
                 for old in offer.replaced:
                     self.traces.pop(old, None)
                     self.added.pop(old, None)
                     self.removed.add(old)
                 self.stats["elites_added"] = self.stats.get("elites_added", 0) + 1
             self.improvements += int(offer.improved)
-            record = self.batches.get(e.get("batch", -1))
+            batch = e.tags.batch
+            record = None if batch is None else self.batches.get(batch)
             if record is not None:
                 record["ingested"] += 1
                 record["improved"] += int(offer.improved)
-                self._maybe_close(e["batch"], record)
+                self._maybe_close(batch, record)
         del self.achieved[:-RECENT]
         if changed:
             self._density = None

@@ -34,6 +34,7 @@ from paramimic.characters import Body
 from paramimic.config import ExperimentConfig
 from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
+from paramimic.messages import SkillOutcome
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
 from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
@@ -304,7 +305,7 @@ class SkillEnv(EnvCore):
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._path: dict[str, list] = {k: [] for k in PATH}
         self._fired: set[str] = set()  # spikes paid this episode
-        self._held: dict | None = None  # the summary at the clip's end while holding after it
+        self._held: SkillOutcome | None = None  # the clip end's outcome while standing after it
         self._hold_left = 0
         self._measure_row(start)
         self._feet_xy = d.site_xpos[c.ee_site_ids[self._feet]][:, :2].copy()
@@ -367,7 +368,7 @@ class SkillEnv(EnvCore):
         info = self._info(dphi, spike, terms, fell=fell)
         cut = not fell and self._hold_left > 0 and self._timed_out()
         if fell or cut or self._hold_left <= 0 or self._steps >= self._max_steps:
-            info["skill"] = self._held | {"held": not (fell or cut)}
+            info["skill"] = self._held.with_held(not (fell or cut))
             return obs, reward, not cut, cut, info
         return obs, reward, False, False, info
 
@@ -565,10 +566,10 @@ class SkillEnv(EnvCore):
             "reward_terms": dict(zip(SKILL_TERMS, terms, strict=True)),
         }
 
-    def _summary(self, completed: bool) -> dict:
+    def _summary(self, completed: bool) -> SkillOutcome:
         """Hindsight parameter a', fitness F (Eq. 10) and the trace of this episode."""
         if self._rsi:  # π0's RSI episode: nothing for the hindsight record or the elite set
-            return {"achieved": None, "fitness": 0.0, "trace": None, "completed": False}
+            return SkillOutcome(None, 0.0, None, False)
         achieved = self._task.copy()
         traj = self.episode_trajectory()
         for t in self.measured:  # hindsight a' by the parameter's own measure
@@ -576,7 +577,7 @@ class SkillEnv(EnvCore):
         achieved = np.clip(achieved, self.task_space.low, self.task_space.high)
         rec = self._rec
         if not completed or len(rec["phi"]) < 2:
-            return {"achieved": achieved, "fitness": 0.0, "trace": None, "completed": False}
+            return SkillOutcome(achieved, 0.0, None, False)
         phi = np.asarray(rec["phi"])
         d = np.asarray(rec["d"])
         trace = np.stack([np.interp(self._bins, phi, d[:, j]) for j in range(d.shape[1])], 1)
@@ -609,7 +610,7 @@ class SkillEnv(EnvCore):
             ),
             r_constraint,
         )
-        return {"achieved": achieved, "fitness": f, "trace": trace, "completed": True}
+        return SkillOutcome(achieved, f, trace, True)
 
     def _observe(self) -> np.ndarray:
         c, d = self.character, self.data

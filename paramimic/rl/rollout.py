@@ -1,8 +1,8 @@
 """The stepping loop: M environments stepped together with one batched policy forward per step.
 
 The same code runs in the serial trainer and inside the Ray rollout actors. Task parameters come
-from a `task_source(n)` (the curriculum) whenever episodes start; each finished episode yields
-an `EpisodeSummary`.
+from a `task_source(n)` (the curriculum's `TaskDeal`) whenever episodes start; each finished
+episode yields an `EpisodeReport` (`paramimic.messages`).
 """
 
 from __future__ import annotations
@@ -14,31 +14,28 @@ import numpy as np
 
 from paramimic.config import ActorsConfig, HorizonGrowthConfig
 from paramimic.envs import ParamEnv
+from paramimic.messages import DealTags, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import NumpyPolicy
 
-# n -> [n, d] task parameters, or a deal: {"tasks": [n, d], "motions": [n, K, D] | None, ...}
-# (the [L21] curriculum's tasks with the motions m_a to imitate and the batch they belong to)
-TaskSource = Callable[[int], "np.ndarray | dict"]
-DEAL_TAGS = ("batch", "region", "motion_version")  # copied from a deal into episode summaries
+# n -> the deal of the next n episodes (the curriculum's, or the sampler actor's)
+TaskSource = Callable[[int], TaskDeal]
+
+
+def as_deal(tasks: np.ndarray | TaskDeal) -> TaskDeal:
+    return tasks if isinstance(tasks, TaskDeal) else TaskDeal(np.asarray(tasks, np.float64))
 
 
 class TaskQueue:
-    """A batch of task parameters (or a deal) handed out in order; it starts over if it runs
-    out. Calls return deals: {"tasks": [n, d], "motions": [n, K, D] | None, tags}."""
+    """A deal (or bare task parameters) handed out in order; it starts over if it runs out."""
 
-    def __init__(self, tasks: np.ndarray | dict) -> None:
-        deal = tasks if isinstance(tasks, dict) else {"tasks": tasks}
-        self.tasks = np.asarray(deal["tasks"], dtype=np.float64)
-        motions = deal.get("motions")
-        self.motions = None if motions is None else np.asarray(motions, np.float64)
-        self.tags = {k: deal[k] for k in DEAL_TAGS if k in deal}
+    def __init__(self, tasks: np.ndarray | TaskDeal) -> None:
+        self.deal = as_deal(tasks)
         self.next = 0
 
-    def __call__(self, n: int) -> dict:
-        idx = (self.next + np.arange(n)) % len(self.tasks)
+    def __call__(self, n: int) -> TaskDeal:
+        idx = (self.next + np.arange(n)) % len(self.deal)
         self.next += n
-        motions = None if self.motions is None else self.motions[idx]
-        return {"tasks": self.tasks[idx], "motions": motions, **self.tags}
+        return self.deal.take(idx)
 
 
 def horizon_of(cfg) -> tuple[HorizonGrowthConfig, int] | None:
@@ -60,39 +57,6 @@ def steps_per_fragment(actors: ActorsConfig, num_steps: int, num_workers: int) -
 
 
 @dataclass
-class EpisodeSummary:
-    episode_id: str
-    task: np.ndarray  # [d]
-    ret: float  # undiscounted sum of rewards
-    length: int
-    fell: bool
-    diverged: bool
-    reward_terms: dict[str, float]  # per-term sums over the episode
-    # the env ended it before its time limit (a fall, a stall, off course, a divergence, ...)
-    ended_early: bool
-    # [L21] episodes: achieved a', fitness F, trace, and the deal's batch/region/motion version
-    skill: dict = field(default_factory=dict)
-    # a clip gait's episode ended by the training rule `env.deviation_limit` (never a fall)
-    deviated: bool = False
-
-    def to_dict(self) -> dict:
-        out = {
-            "episode_id": self.episode_id,
-            "task": self.task.tolist(),
-            "return": self.ret,
-            "length": self.length,
-            "fell": self.fell,
-            "diverged": self.diverged,
-            "reward_terms": self.reward_terms,
-            "ended_early": self.ended_early,
-            "deviated": self.deviated,
-        }
-        for k, v in self.skill.items():
-            out[k] = v.tolist() if isinstance(v, np.ndarray) else v
-        return out
-
-
-@dataclass
 class Fragment:
     """T steps of M environments; every array is [T, M, ...]."""
 
@@ -108,7 +72,7 @@ class Fragment:
     truncated: np.ndarray  # [T, M] bool
     task_index: np.ndarray  # [T, M] row of `tasks` in force at each step
     tasks: np.ndarray  # [K, d]
-    episodes: list[EpisodeSummary] = field(default_factory=list)
+    episodes: list[EpisodeReport] = field(default_factory=list)
     policy_version: int = 0
 
     @property
@@ -158,27 +122,20 @@ class RolloutWorker:
                     full = env.horizon_seconds
                     env.set_time_limit(growth.seconds(version * samples_per_version, full))
 
-    def _tasks(self, n: int) -> list[dict] | None:
-        """Reset options of the next n episodes: task, motion (if any) and the deal's tags."""
-        if self.task_source is None:
-            return None
-        deal = self.task_source(n)
-        if not isinstance(deal, dict):
-            deal = {"tasks": deal}
-        tasks, motions = np.asarray(deal["tasks"]), deal.get("motions")
-        tags = {k: deal[k] for k in DEAL_TAGS if k in deal}
-        return [
-            {"task": tasks[j], "motion": None if motions is None else motions[j], "tags": tags}
-            for j in range(n)
-        ]
+    def _tasks(self, n: int) -> TaskDeal | None:
+        """The deal of the next n episodes (None: each env draws its own tasks)."""
+        return None if self.task_source is None else as_deal(self.task_source(n))
 
-    def _start(self, i: int, start: dict | None, seed: int | None = None) -> np.ndarray:
+    def _start(
+        self, i: int, deal: TaskDeal | None, j: int = 0, seed: int | None = None
+    ) -> np.ndarray:
+        """Reset env i for row j of `deal`: its task and its motion m_a (if any)."""
         env = self.envs[i]
         options = None
-        if start is not None:
-            options = {"task": start["task"]}
-            if start["motion"] is not None:
-                options["motion"] = start["motion"]
+        if deal is not None:
+            options = {"task": deal.tasks[j]}
+            if deal.motions is not None:
+                options["motion"] = deal.motions[j]
         obs, info = env.reset(seed=seed, options=options)
         self._ep[i] = {
             "id": f"{self.id_prefix}w{self.worker_id}-s{self._seed}-e{self._episode_counter}",
@@ -186,7 +143,7 @@ class RolloutWorker:
             "ret": 0.0,
             "len": 0,
             "terms": {},
-            "tags": {} if start is None else start["tags"],
+            "tags": DealTags() if deal is None else deal.tags(),
         }
         self._episode_counter += 1
         return obs
@@ -194,14 +151,12 @@ class RolloutWorker:
     def _reset_all(self) -> None:
         m = len(self.envs)
         self._ep = [{} for _ in range(m)]
-        starts = self._tasks(m)
+        deal = self._tasks(m)
         seeds = self.rng.integers(0, 2**31 - 1, size=m)
-        self._obs = np.stack(
-            [self._start(i, None if starts is None else starts[i], int(seeds[i])) for i in range(m)]
-        )
+        self._obs = np.stack([self._start(i, deal, i, int(seeds[i])) for i in range(m)])
 
     def collect(
-        self, num_steps: int, tasks: np.ndarray | None = None, use_policy: bool = True
+        self, num_steps: int, tasks: np.ndarray | TaskDeal | None = None, use_policy: bool = True
     ) -> Fragment:
         """Step all envs `num_steps` times; episodes that start take `tasks` in order if given.
 
@@ -258,9 +213,9 @@ class RolloutWorker:
                 ended.append(i)
         next_obs = np.stack([res[0] for res in results])
         if ended:
-            starts = self._tasks(len(ended))
+            deal = self._tasks(len(ended))
             for j, i in enumerate(ended):
-                next_obs[i] = self._start(i, None if starts is None else starts[j])
+                next_obs[i] = self._start(i, deal, j)
                 run.tasks.append(self._ep[i]["task"])
                 run.current[i] = len(run.tasks) - 1
         return next_obs
@@ -290,7 +245,7 @@ class _Run:
     tasks: list[np.ndarray]  # tasks in force: rows are added as episodes start
     current: np.ndarray  # [M] row of `tasks` of each env's episode
     final_obs: list[tuple[int, int, np.ndarray]] = field(default_factory=list)
-    episodes: list[EpisodeSummary] = field(default_factory=list)
+    episodes: list[EpisodeReport] = field(default_factory=list)
 
 
 class _Buffers:
@@ -322,8 +277,8 @@ class _Buffers:
         self.truncated[t] = truncated
 
 
-def _summary(ep: dict, info: dict, terminated: bool) -> EpisodeSummary:
-    return EpisodeSummary(
+def _summary(ep: dict, info: dict, terminated: bool) -> EpisodeReport:
+    return EpisodeReport(
         episode_id=ep["id"],
         task=np.asarray(ep["task"]),
         ret=ep["ret"],
@@ -332,18 +287,7 @@ def _summary(ep: dict, info: dict, terminated: bool) -> EpisodeSummary:
         diverged=bool(info["diverged"]),
         reward_terms=ep["terms"],
         ended_early=terminated,
-        skill=_skill_fields(info, ep["tags"]),
         deviated=bool(info.get("deviated", False)),
+        skill=info.get("skill"),
+        tags=ep["tags"],
     )
-
-
-def _skill_fields(info: dict, tags: dict) -> dict:
-    """What an [L21] episode reports to the curriculum: a', F, its trace, and the deal's tags."""
-    skill = info.get("skill")
-    if skill is None:
-        return {}
-    return dict(tags) | {
-        "achieved": skill["achieved"],
-        "fitness": skill["fitness"],
-        "trace": skill["trace"],
-    }

@@ -20,6 +20,7 @@ from ray.exceptions import GetTimeoutError, RayActorError
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
+from paramimic.messages import TaskDeal
 from paramimic.rl.rollout import Fragment, RolloutWorker, horizon_of
 from services.keys import RAY_NAMESPACE, SamplerUnavailable
 
@@ -71,7 +72,7 @@ class RolloutActor:
         weights: list[ray.ObjectRef],
         version: int,
         num_steps: int,
-        tasks: int | np.ndarray | dict,
+        tasks: int | np.ndarray | TaskDeal,
         use_policy: bool = True,
     ) -> Fragment:
         """One fragment whose episodes take `tasks` (an array or a deal) or that many tasks
@@ -85,8 +86,7 @@ class RolloutActor:
             tasks = self._ask_sampler(lambda: self.sampler.next_deal.remote(n, self.source))
         fragment = self.worker.collect(num_steps, tasks, use_policy)
         if self.sampler is not None:  # acknowledged before the learner sees the fragment
-            episodes = [e.to_dict() for e in fragment.episodes]
-            self._ask_sampler(lambda: self.sampler.ingest.remote(episodes))
+            self._ask_sampler(lambda: self.sampler.ingest.remote(fragment.episodes))
         return fragment
 
     def _ask_sampler(self, call):

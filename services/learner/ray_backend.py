@@ -24,6 +24,7 @@ import ray
 from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayTaskError
 
 from paramimic.config import ExperimentConfig
+from paramimic.messages import EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
 from services.keys import SamplerUnavailable
@@ -82,10 +83,10 @@ class SamplerClient:
     def next_tasks(self, n: int) -> np.ndarray:
         return self._get("next_tasks", n, "learner")
 
-    def next_deal(self, n: int) -> dict:
+    def next_deal(self, n: int) -> TaskDeal:
         return self._get("next_deal", n, "learner")
 
-    def ingest(self, episodes: list[dict]) -> int:
+    def ingest(self, episodes: list[EpisodeReport]) -> int:
         return self._get("ingest", episodes)
 
     def elite_data(self) -> tuple[np.ndarray, np.ndarray]:

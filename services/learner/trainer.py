@@ -27,10 +27,10 @@ from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.evaluation import deterministic, run_episodes
+from paramimic.messages import EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.ppo import PPOLearner, adopt_controller
 from paramimic.rl.rollout import (
-    EpisodeSummary,
     Fragment,
     RolloutWorker,
     horizon_of,
@@ -55,9 +55,9 @@ class Curriculum(Protocol):
 
     def next_tasks(self, n: int) -> np.ndarray: ...
 
-    def next_deal(self, n: int) -> dict: ...
+    def next_deal(self, n: int) -> TaskDeal: ...
 
-    def ingest(self, episodes: list[dict]) -> int: ...
+    def ingest(self, episodes: list[EpisodeReport]) -> int: ...
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None: ...
 
@@ -115,7 +115,7 @@ class SerialBackend:
     def collect(self, weights: dict[str, np.ndarray], version: int) -> list[Fragment]:
         self.worker.set_weights(weights, version)
         fragment = self.worker.collect(self.steps, self.curriculum.next_deal(self.n_tasks))
-        self.curriculum.ingest([e.to_dict() for e in fragment.episodes])
+        self.curriculum.ingest(fragment.episodes)
         return [fragment]
 
     def stats(self) -> dict:
@@ -432,7 +432,7 @@ def reset_observations(cfg: ExperimentConfig, n: int = 64) -> np.ndarray:
     return np.stack([env.reset(seed=cfg.train.seed * 1000 + i)[0] for i in range(n)])
 
 
-def episode_metrics(episodes: list[EpisodeSummary]) -> dict:
+def episode_metrics(episodes: list[EpisodeReport]) -> dict:
     if not episodes:
         return {"episodes": 0}
     return {

@@ -23,6 +23,7 @@ import numpy as np
 
 from paramimic.config import ExperimentConfig
 from paramimic.curriculum.skill import new_curriculum
+from paramimic.messages import EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from services.keys import SAMPLES_LIMIT, RunKeys
 from services.store import add_event, connect, dumps
@@ -119,9 +120,9 @@ class SamplerService:
 
     def next_tasks(self, n: int, source: str = "") -> np.ndarray:
         """n task parameters for the episodes about to start: [n, d]."""
-        return self.next_deal(n, source)["tasks"]
+        return self.next_deal(n, source).tasks
 
-    def next_deal(self, n: int, source: str = "") -> dict:
+    def next_deal(self, n: int, source: str = "") -> TaskDeal:
         """The tasks of the episodes about to start, [n, d], as a deal ([L21]: with the
         motions m_a to imitate, the batch and its region)."""
         deal = self.curriculum.next_deal(int(n))
@@ -130,9 +131,9 @@ class SamplerService:
                 "time": time.time(),
                 "source": source,
                 "names": list(self.curriculum.space.names),
-                "tasks": deal["tasks"].tolist(),
-                "region": deal.get("region"),
-                "batch": deal.get("batch"),
+                "tasks": deal.tasks.tolist(),
+                "region": deal.region,
+                "batch": deal.batch,
             }
         )
 
@@ -143,9 +144,9 @@ class SamplerService:
         self._commit(("core",), record)
         return deal
 
-    def ingest(self, episodes: list[dict]) -> int:
+    def ingest(self, episodes: list[EpisodeReport]) -> int:
         """Count finished episodes once each (by `episode_id`); returns how many were new."""
-        unique = {e["episode_id"]: e for e in episodes}
+        unique = {e.episode_id: e for e in episodes}
         if not unique:
             return 0
         ids = list(unique)
@@ -153,7 +154,7 @@ class SamplerService:
         new = [unique[i] for i, s in zip(ids, seen, strict=True) if not s]
         if not new:
             return 0
-        new_ids = [e["episode_id"] for e in new]
+        new_ids = [e.episode_id for e in new]
         self.curriculum.ingest(new)
         self.recent_ids.extend(new_ids)
         changed = self.skill and bool(self.curriculum.added or self.curriculum.removed)
