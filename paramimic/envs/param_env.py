@@ -36,6 +36,7 @@ from paramimic.envs.rewards import (
     wl19_task_share,
     wl19_weights,
 )
+from paramimic.messages import StepInfo
 from paramimic.motion.clip_gait import ClipGait
 from paramimic.motion.phase import PhaseSampler
 from paramimic.motion.retarget import RetargetedGait
@@ -382,18 +383,19 @@ class ParamEnv(EnvCore):
         truncated = (self._steps >= self._max_steps or self._timed_out()) and not ended
         if self._phases is not None and (ended or truncated):
             self._phases.update(self._phase0, failed=fell or deviated)
-        info = {
-            "task": self._task.copy(),
-            "fell": fell,
-            "stalled": stalled,
-            "off_course": off_course,
-            "deviated": deviated,
-            "diverged": False,
-            "dphi": 1.0,
-            "reward_spike": 0.0,
-            "reward_terms": terms,
-        }
+        info = self._step_info(
+            terms, fell=fell, stalled=stalled, off_course=off_course, deviated=deviated
+        )
         return obs, reward, ended, truncated, info
+
+    def _step_info(
+        self, terms: dict, *, fell=False, stalled=False, off_course=False, deviated=False,
+        diverged=False,
+    ) -> StepInfo:  # fmt: skip
+        return StepInfo(
+            task=self._task.copy(), fell=fell, stalled=stalled, off_course=off_course,
+            deviated=deviated, diverged=diverged, dphi=1.0, reward_spike=0.0, reward_terms=terms,
+        )  # fmt: skip
 
     def _deviated(self) -> bool:
         """`deviation_limit`: a body (relative to the root, in its heading frame) or the root's
@@ -454,17 +456,7 @@ class ParamEnv(EnvCore):
         ring[self._steps % len(ring)] = com
 
     def _diverged(self) -> tuple:
-        info = {
-            "task": self._task.copy(),
-            "fell": False,
-            "stalled": False,
-            "off_course": False,
-            "deviated": False,
-            "diverged": True,
-            "dphi": 1.0,
-            "reward_spike": 0.0,
-            "reward_terms": dict.fromkeys(REWARD_TERMS, 0.0),
-        }
+        info = self._step_info(dict.fromkeys(REWARD_TERMS, 0.0), diverged=True)
         return self._last_obs, 0.0, True, False, info
 
     def _sense(self) -> None:

@@ -34,7 +34,7 @@ from paramimic.characters import Body
 from paramimic.config import ExperimentConfig
 from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
-from paramimic.messages import SkillOutcome
+from paramimic.messages import SkillOutcome, StepInfo
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
 from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
@@ -556,15 +556,11 @@ class SkillEnv(EnvCore):
         truncated = not terminated
         return obs, reward, terminated, truncated, info
 
-    def _info(self, dphi, spike, terms, fell, diverged=False) -> dict:
-        return {
-            "task": self._task.copy(),
-            "fell": fell,
-            "diverged": diverged,
-            "dphi": dphi,
-            "reward_spike": spike,
-            "reward_terms": dict(zip(SKILL_TERMS, terms, strict=True)),
-        }
+    def _info(self, dphi, spike, terms, fell, diverged=False) -> StepInfo:
+        return StepInfo(
+            task=self._task.copy(), fell=fell, diverged=diverged, dphi=dphi, reward_spike=spike,
+            reward_terms=dict(zip(SKILL_TERMS, terms, strict=True)),
+        )  # fmt: skip
 
     def _summary(self, completed: bool) -> SkillOutcome:
         """Hindsight parameter a', fitness F (Eq. 10) and the trace of this episode."""
