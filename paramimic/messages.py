@@ -1,12 +1,12 @@
 """The messages that cross process boundaries, typed once.
 
 A training run passes three things between its processes (the sampler actor, the rollout
-actors, the learner, the API): the curriculum's **deal** of task parameters (and, for [L21], the
-motions m_a to imitate), the **report** of each finished episode, and the **summary** of the
-curriculum the API and the CLI show. Each is a frozen dataclass here; Ray carries them as they
-are, and `to_dict` / `from_dict` turn them into JSON-able dicts at the boundaries that need
-text (Redis, the API). The env's per-step `info` stays a dict (gymnasium's contract), with its
-keys typed by `StepInfo`.
+actors, the learner, the API): the curriculum's **deal** of task parameters (and, for [L21],
+the motions m_a to imitate), the **report** of each finished episode, and the **summary** of
+the curriculum the API and the CLI show (`TaskDeal`, `EpisodeReport`, `CurriculumSummary`).
+Each is a frozen dataclass here; Ray carries them as they are, and `to_dict` / `from_dict` turn
+them into JSON-able dicts at the boundaries that need text (Redis, the API). The env's per-step
+`info` stays a dict (gymnasium's contract), with its keys typed by `StepInfo`.
 
 This module is the bottom of the library: it imports numpy only, so that the envs, the rollout
 loop and the curricula all speak it.
@@ -161,6 +161,53 @@ class EpisodeReport:
             None if skill is None else SkillOutcome.from_dict(skill),
             DealTags(**d.get("tags", {})),
         )
+
+
+@dataclass(frozen=True)
+class CurriculumSummary:
+    """The curriculum's public state: what the API serves under /curriculum (its response
+    model has these fields, described) and the CLI's `status` shows. The [L21] fields are None
+    for the [WL19] curriculum."""
+
+    mode: str  # adaptive, uniform or skill
+    k: float
+    mu: float | None
+    marginal_iteration: int
+    refills: int
+    buffer_adaptive: bool
+    buffer_size: int
+    buffer_mean: dict[str, float]
+    buffer_std: dict[str, float]
+    task_names: list[str]
+    episodes: int
+    mean_return: float | None
+    fall_percent: float | None
+    tasks_served: int
+    range_width: float | None
+    # [L21] §5-6
+    phase: str | None = None
+    explored_ratio: float | None = None
+    exploration_rate_surrounding: float | None = None
+    exploration_rate_visited: float | None = None
+    stage: str | None = None
+    elites: int | None = None
+    elite_mean_fitness: float | None = None
+    phase_switches: int | None = None
+    motion_version: int | None = None
+    motion_loss: float | None = None
+    batch: int | None = None
+    batch_region: str | None = None
+    reference: dict[str, float] | None = None
+    task_ranges: dict[str, list[float]] | None = None
+    history: list[dict[str, float]] | None = None
+    achieved: dict[str, dict[str, float]] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CurriculumSummary:
+        return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
 
 
 class StepInfo(TypedDict, total=False):

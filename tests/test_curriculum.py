@@ -33,8 +33,8 @@ def test_state_round_trips_part_by_part():
     assert b.to_state() == a.to_state()
     np.testing.assert_array_equal(a.next_tasks(7), b.next_tasks(7))
     assert set(a.to_state(("core",))) == {"core"}
-    assert b.summary()["episodes"] == 1 and b.summary()["fall_percent"] == 100.0
-    assert b.summary()["tasks_served"] == 12 and b.mode == "adaptive"
+    assert b.summary().episodes == 1 and b.summary().fall_percent == 100.0
+    assert b.summary().tasks_served == 12 and b.mode == "adaptive"
 
 
 def test_the_grid_is_v_bar_over_the_display_dims():
@@ -102,7 +102,7 @@ def test_a_widening_range_starts_at_the_centre_and_grows_when_mastered():
     c.ingest(_episodes(9, falls=0))  # a window is 10 episodes
     assert c.width == pytest.approx(0.5)
     c.ingest(_episodes(1, falls=0) + _episodes(20, falls=0))
-    assert c.width == 1.0 and c.summary()["range_width"] == 1.0  # capped at the whole range
+    assert c.width == 1.0 and c.summary().range_width == 1.0  # capped at the whole range
 
 
 def test_a_range_grows_on_episodes_that_last_not_on_those_that_end_early_standing():

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from paramimic.messages import DealTags, EpisodeReport, SkillOutcome, TaskDeal
+from paramimic.messages import CurriculumSummary, DealTags, EpisodeReport, SkillOutcome, TaskDeal
 
 
 def test_a_deal_checks_its_shapes_and_takes_rows_with_its_tags():
@@ -54,3 +54,15 @@ def test_the_rollouts_report_typed_episodes_with_the_deals_tags():
     for e in f.episodes:
         assert e.tags == DealTags(3, "reference", 0) and e.task.tolist() == [1.2]
         assert isinstance(e.skill, SkillOutcome)
+
+
+def test_the_apis_curriculum_model_serves_every_field_of_the_summary():
+    from dataclasses import fields
+
+    from services.api.models import Curriculum
+
+    summary = {f.name for f in fields(CurriculumSummary)}
+    missing = summary - set(Curriculum.model_fields)
+    assert not missing, f"the API's Curriculum model lacks {sorted(missing)}"
+    extra = set(Curriculum.model_fields) - summary
+    assert extra == {"run_id", "paused", "updated_at"}  # what the API adds

@@ -46,7 +46,7 @@ def test_two_actors_deliver_fragments_and_training_advances(distributed, tmp_pat
     assert backend.stats()["actor_restarts"] == 0
     # the actors reported every finished episode to the sampler
     episodes = trainer.progress.episodes + sum(len(f.episodes) for f in frags)
-    assert trainer.curriculum.summary()["episodes"] == episodes
+    assert trainer.curriculum.summary().episodes == episodes
 
 
 def test_the_learners_edge_test_widens_the_sampler_actors_range(distributed, tmp_path):

@@ -62,9 +62,9 @@ def test_ingesting_the_same_summaries_twice_changes_nothing(redis_server, run_id
     # a batch with one new episode and a duplicate of it counts it once
     assert sampler.ingest([_episode(9, 1.0), _episode(9, 1.0), batch[0]]) == 1
     summary = sampler.summary()
-    assert summary["episodes"] == 6
-    assert summary["mean_return"] == pytest.approx((5 * 10.0 + 1.0) / 6)
-    assert summary["fall_percent"] == pytest.approx(100 * 3 / 6)  # ep-0, 2, 4 fell
+    assert summary.episodes == 6
+    assert summary.mean_return == pytest.approx((5 * 10.0 + 1.0) / 6)
+    assert summary.fall_percent == pytest.approx(100 * 3 / 6)  # ep-0, 2, 4 fell
 
 
 def test_a_new_sampler_on_the_same_run_continues_exactly_where_it_was(redis_server, run_id):
@@ -97,7 +97,7 @@ def test_the_learners_edge_test_widens_the_range_in_one_transaction(redis_server
     assert a.judge_edge(16, 12) == pytest.approx(0.2)  # 75 % fell: stays
     assert a.judge_edge(16, 2) == pytest.approx(0.3)
     b = SamplerService(raw, redis_server.url, run_id, restarted=True)
-    assert b.curriculum.width == pytest.approx(0.3) and b.summary()["range_width"] == 0.3
+    assert b.curriculum.width == pytest.approx(0.3) and b.summary().range_width == 0.3
     events = redis.Redis.from_url(redis_server.url, decode_responses=True).xrange(
         RunKeys(run_id).events
     )
@@ -175,8 +175,8 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(
         assert stack.trainer.progress.env_steps >= total
         # every finished episode reached the sampler exactly once, retries or not
         summary = stack.trainer.curriculum.summary()
-        assert summary["episodes"] == stack.trainer.progress.episodes
-        assert ray.get(stack.sampler.seen_count.remote()) == summary["episodes"]
+        assert summary.episodes == stack.trainer.progress.episodes
+        assert ray.get(stack.sampler.seen_count.remote()) == summary.episodes
     assert _events(redis_server.url, run_id).count("sampler_restarted") == 2
 
 
@@ -207,7 +207,7 @@ def test_a_redis_restart_during_a_run_loses_nothing_acknowledged(local_ray, run_
             summary = json.loads(client.hget(keys.curriculum, "summary"))
             assert summary["episodes"] >= episodes_before
             # the sampler rewrote its state after reconnecting: Redis agrees with it
-            assert summary == stack.trainer.curriculum.summary()
+            assert summary == stack.trainer.curriculum.summary().to_dict()
             assert client.scard(keys.seen) == summary["episodes"] == stack.trainer.progress.episodes
             client.close()
     finally:

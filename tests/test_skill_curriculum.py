@@ -77,7 +77,7 @@ def test_motions_follow_the_bootstrap_stage():
     motions = c.motions_for(tasks)
     from_net = np.all(np.isclose(motions, net.predict(tasks), atol=1e-5), axis=(1, 2))
     assert 0.3 < from_net.mean() < 0.7  # a random choice between P_θ and the proxy
-    assert c.summary()["motion_version"] == 1 and c.summary()["stage"] == "mixed"
+    assert c.summary().motion_version == 1 and c.summary().stage == "mixed"
 
 
 def test_batches_measure_exploration_rates_and_switch_phases():
@@ -120,8 +120,8 @@ def test_batches_measure_exploration_rates_and_switch_phases():
     c.ingest([episode(90 + i, (0.5, 0.5), 0.1, deal.batch, 1.0) for i in range(10)])
     assert c.next_deal(1).region == VISITED  # batch 7: refinement draws from A_h
     s = c.summary()
-    assert s["phase"] == "refinement" and s["explored_ratio"] > 0
-    assert [h["episodes"] for h in s["history"]] == [16, 29, 39, 49, 59, 69]
+    assert s.phase == "refinement" and s.explored_ratio > 0
+    assert [h["episodes"] for h in s.history] == [16, 29, 39, 49, 59, 69]
 
 
 def test_uniform_sampling_is_the_baseline():
@@ -130,7 +130,7 @@ def test_uniform_sampling_is_the_baseline():
     c.ingest([episode(i, (0.5, 0.5), 0.5, 1, 1.0) for i in range(50)])
     c.update_motion(None, 0, None, "proxy")
     tasks = c.next_deal(50).tasks
-    assert c.summary()["phase"] == "uniform"
+    assert c.summary().phase == "uniform"
     assert tasks.min(axis=0) == pytest.approx([0, 0], abs=0.1)
     assert tasks.max(axis=0) == pytest.approx([1, 1], abs=0.1)
 

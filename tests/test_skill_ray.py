@@ -53,14 +53,14 @@ def test_walker_jump_on_ray_fills_elites_in_redis_and_the_api(
         summary = stack.trainer.curriculum.summary()
     # the learner left π0 after base_max_iterations and fitted P_θ on the elites
     assert [m["stage"] for m in metrics][:2] == ["base", "proxy"]
-    assert summary["stage"] in ("proxy", "mixed") and summary["motion_version"] >= 1
-    assert summary["elites"] > 0 and summary["episodes"] == stack.trainer.progress.episodes
+    assert summary.stage in ("proxy", "mixed") and summary.motion_version >= 1
+    assert summary.elites > 0 and summary.episodes == stack.trainer.progress.episodes
 
     r = redis.Redis.from_url(redis_server.url, decode_responses=True)
     keys = RunKeys(run_id)
     elites = json.loads(r.hget(keys.curriculum, "elites"))
     traces = r.hgetall(keys.traces)
-    assert set(traces) == set(elites["keys"]) and len(traces) == summary["elites"]
+    assert set(traces) == set(elites["keys"]) and len(traces) == summary.elites
     shape = np.array(json.loads(next(iter(traces.values())))).shape
     assert shape == (16, 3 + 6 + 1)  # bins x (root x/z/pitch, six joints, τ)
     assert min(elites["fitness"]) > 0.1
@@ -72,16 +72,16 @@ def test_walker_jump_on_ray_fills_elites_in_redis_and_the_api(
 
     with httpx.Client(base_url=api_url) as c:
         cur = c.get(f"/runs/{run_id}/curriculum").json()
-        assert cur["mode"] == "skill" and cur["elites"] == summary["elites"]
+        assert cur["mode"] == "skill" and cur["elites"] == summary.elites
         assert cur["phase"] in ("exploration", "refinement")
-        assert cur["episodes"] == summary["episodes"]
+        assert cur["episodes"] == summary.episodes
         assert cur["reference"]["gravity"] == 1.0
         items = c.get(f"/runs/{run_id}/curriculum/elites").json()["items"]
         assert {e["key"] for e in items} == set(elites["keys"])
         near = c.get(f"/runs/{run_id}/curriculum/elites", params={"near": "1.0,0.1", "k": 1})
         assert len(near.json()["items"]) == 1
         density = c.get(f"/runs/{run_id}/curriculum/density").json()
-        assert density["available"] and density["elites"] == summary["elites"]
+        assert density["available"] and density["elites"] == summary.elites
         assert max(map(max, density["values"])) > 0.5
         samples = c.get(f"/runs/{run_id}/curriculum/samples").json()
         assert {s["region"] for s in samples} >= {"reference"}

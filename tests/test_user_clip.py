@@ -139,10 +139,10 @@ def test_a_user_clip_trains_on_ray_with_the_sampler_in_redis(distributed, tmp_pa
     trainer.train(backend, total_steps=2 * 256)
     assert trainer.progress.iteration >= 2
     summary = trainer.curriculum.summary()  # the sampler actor's, its state in Redis
-    assert summary["episodes"] > 0
+    assert summary.episodes > 0
     # a' for both declared parameters, measured on the episodes (the untrained humanoid's
     # ankles and COM move: not the commanded values, and inside the box)
-    achieved = summary["achieved"]
+    achieved = summary.achieved
     for name in ("rise", "kick"):
         lo, hi = cfg.task[name]
         a = achieved[name]

@@ -11,7 +11,7 @@ import numpy as np
 
 from paramimic.config import CurriculumConfig, ExperimentConfig
 from paramimic.curriculum.mcmc import AdaptiveSampler
-from paramimic.messages import EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
@@ -177,33 +177,28 @@ class AdaptiveCurriculum:
             "iteration": self.marginal_iteration,
         }
 
-    def summary(self) -> dict:
+    def summary(self) -> CurriculumSummary:
         """The public state: what the API shows under /curriculum."""
         s = self.stats
         mean, std = self._buffer_stats()
         episodes = max(s["episodes"], 1)
-        return {
-            "mode": self.mode,
-            "k": self.sampler.k,
-            "mu": self.mu,
-            "marginal_iteration": self.marginal_iteration,
-            "refills": self.sampler.refills,
-            "buffer_adaptive": self.sampler.adaptive,
-            "buffer_size": len(self.sampler.buffer),
-            "buffer_mean": mean,
-            "buffer_std": std,
-            "task_names": list(self.space.names),
-            "episodes": int(s["episodes"]),
-            "mean_return": s["return_sum"] / episodes if s["episodes"] else None,
-            "fall_percent": 100.0 * s["falls"] / episodes if s["episodes"] else None,
-            "tasks_served": int(s["tasks_served"]),
-            "range_width": self.width,
-            # [L21] §6 fields, filled by the exploration/refinement curriculum (Part 4)
-            "phase": None,
-            "explored_ratio": None,
-            "exploration_rate_surrounding": None,
-            "exploration_rate_visited": None,
-        }
+        return CurriculumSummary(
+            mode=self.mode,
+            k=self.sampler.k,
+            mu=self.mu,
+            marginal_iteration=self.marginal_iteration,
+            refills=self.sampler.refills,
+            buffer_adaptive=self.sampler.adaptive,
+            buffer_size=len(self.sampler.buffer),
+            buffer_mean=mean,
+            buffer_std=std,
+            task_names=list(self.space.names),
+            episodes=int(s["episodes"]),
+            mean_return=s["return_sum"] / episodes if s["episodes"] else None,
+            fall_percent=100.0 * s["falls"] / episodes if s["episodes"] else None,
+            tasks_served=int(s["tasks_served"]),
+            range_width=self.width,
+        )
 
     def _buffer_stats(self) -> tuple[dict, dict]:
         """Per-dimension mean and std of S, recomputed only when S is replaced."""

@@ -17,6 +17,7 @@ Pure and serialisable like `AdaptiveCurriculum`, whose V̄, μ, k and counters i
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -33,7 +34,7 @@ from paramimic.curriculum.density import (
 from paramimic.curriculum.elite_set import EliteRule, EliteSet, Offer
 from paramimic.curriculum.knn_proxy import knn_proxy
 from paramimic.curriculum.mcmc import metropolis_hastings, surrogate_log_density
-from paramimic.messages import EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
@@ -315,33 +316,29 @@ class SkillCurriculum(AdaptiveCurriculum):
             "keys": [self.elites.keys[s] for s in live],
         }
 
-    def summary(self) -> dict:
-        s = super().summary()
+    def summary(self) -> CurriculumSummary:
         last = self.history[-1] if self.history else None
         phase = self.phase.phase if self.stage != "base" else "base"
-        s.update(
-            {
-                "phase": "uniform" if self.sc.sampling == "uniform" else phase,
-                "stage": self.stage,
-                "explored_ratio": None if last is None else last[1],
-                "exploration_rate_surrounding": self.phase.rate_surrounding,
-                "exploration_rate_visited": self.phase.rate_visited,
-                "elites": len(self.elites),
-                "elite_mean_fitness": float(self.elites.fitness[self.elites.live()].mean())
-                if len(self.elites)
-                else None,
-                "phase_switches": self.phase.switches,
-                "motion_version": self.motion_version,
-                "motion_loss": self.motion_loss,
-                "batch": None if self.batch is None else self.batch["id"],
-                "batch_region": None if self.batch is None else self.batch["region"],
-                "reference": self.space.to_dict(self.reference),
-                "task_ranges": {k: list(v) for k, v in self.space.ranges().items()},
-                "history": [{"episodes": n, "explored_ratio": er} for n, er in self.history[-200:]],
-                "achieved": self._achieved_summary(),
-            }
+        fitness = self.elites.fitness[self.elites.live()]
+        return replace(
+            super().summary(),
+            phase="uniform" if self.sc.sampling == "uniform" else phase,
+            stage=self.stage,
+            explored_ratio=None if last is None else last[1],
+            exploration_rate_surrounding=self.phase.rate_surrounding,
+            exploration_rate_visited=self.phase.rate_visited,
+            elites=len(self.elites),
+            elite_mean_fitness=float(fitness.mean()) if len(self.elites) else None,
+            phase_switches=self.phase.switches,
+            motion_version=self.motion_version,
+            motion_loss=self.motion_loss,
+            batch=None if self.batch is None else self.batch["id"],
+            batch_region=None if self.batch is None else self.batch["region"],
+            reference=self.space.to_dict(self.reference),
+            task_ranges={k: list(v) for k, v in self.space.ranges().items()},
+            history=[{"episodes": n, "explored_ratio": er} for n, er in self.history[-200:]],
+            achieved=self._achieved_summary(),
         )
-        return s
 
     def _achieved_summary(self) -> dict[str, dict[str, float]]:
         """Per task parameter: mean, min and max of a' over the latest episodes."""

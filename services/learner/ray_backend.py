@@ -24,7 +24,7 @@ import ray
 from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayTaskError
 
 from paramimic.config import ExperimentConfig
-from paramimic.messages import EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
 from services.keys import SamplerUnavailable
@@ -107,7 +107,7 @@ class SamplerClient:
     def judge_edge(self, episodes: int, falls: int) -> float:
         return self._get("judge_edge", episodes, falls)
 
-    def summary(self) -> dict:
+    def summary(self) -> CurriculumSummary:
         return self._get("summary")
 
     def to_state(self) -> dict:

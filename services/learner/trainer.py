@@ -27,7 +27,7 @@ from paramimic.curriculum.parameterization_net import ParameterizationNet
 from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.evaluation import deterministic, run_episodes
-from paramimic.messages import EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.ppo import PPOLearner, adopt_controller
 from paramimic.rl.rollout import (
@@ -72,7 +72,7 @@ class Curriculum(Protocol):
 
     def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None: ...
 
-    def summary(self) -> dict: ...
+    def summary(self) -> CurriculumSummary: ...
 
     def to_state(self) -> dict: ...
 
@@ -286,7 +286,7 @@ class Trainer:
             metrics.update(self.update_motion(metrics.get("mean_return")))
         if cfg.curriculum.widen is not None:  # how much of the task range is in use
             metrics.update(self.check_edge())
-            metrics["range_width"] = self.curriculum.summary()["range_width"]
+            metrics["range_width"] = self.curriculum.summary().range_width
         self.bad_updates = self.bad_updates + 1 if metrics["skipped_steps"] else 0
         return metrics
 

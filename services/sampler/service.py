@@ -23,7 +23,7 @@ import numpy as np
 
 from paramimic.config import ExperimentConfig
 from paramimic.curriculum.skill import new_curriculum
-from paramimic.messages import EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from services.keys import SAMPLES_LIMIT, RunKeys
 from services.store import add_event, connect, dumps
@@ -81,7 +81,7 @@ class SamplerService:
             wanted = self.parts if full else tuple(parts)
             state = self.curriculum.to_state([p for p in wanted if p != TRACES])
             fields = {p: dumps(v) for p, v in state.items()}
-            fields["summary"] = dumps(self.curriculum.summary())
+            fields["summary"] = dumps(self.curriculum.summary().to_dict())
             fields["updated_at"] = f"{time.time():.3f}"
             if "marginal" in wanted:
                 fields["grid"] = dumps(self.curriculum.marginal_grid(GRID_SIZE))
@@ -214,7 +214,7 @@ class SamplerService:
         self.rewrite_all = True  # every part, traces included
         self._commit(self.parts, event=("sampler_loaded", "sampler loaded a checkpoint's state"))
 
-    def summary(self) -> dict:
+    def summary(self) -> CurriculumSummary:
         return self.curriculum.summary()
 
     def digest(self) -> str:
