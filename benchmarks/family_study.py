@@ -1,4 +1,4 @@
-"""Families that learn (Part 9): what makes one controller work on most bodies of walker_legs.
+"""Families that learn: what makes one controller work on most bodies of walker_legs.
 
 Each variant is a set of config overrides on configs/walker_legs.yaml, trained with the serial
 trainer (one torch thread, so two runs share the 2 cores) and evaluated with the deterministic
@@ -48,7 +48,8 @@ CONFIG = "configs/walker_legs.yaml"
 # does not name env.retarget, the stall rule or the normalizer's floor runs without them
 # (`variant_config`), as it was measured (configs/biped_lower.yaml ships the floor).
 UNNAMED = {"env.retarget": False, "env.stall_speed_ratio": None, "ppo.obs_std_floor": 0.0}
-LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}  # Part 8's policy std
+# the learned policy std of the first walker_legs recipe
+LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}
 FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
 STD01 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
 STD005 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.05)}
@@ -82,7 +83,7 @@ EDGE_WIDEN = {
     }
 }
 VARIANTS: dict[str, dict] = {
-    # PPO as Part 8 shipped it (learned std from e^-1, gamma 0.95), Part 9's rule fixes in
+    # PPO as first shipped (learned std from e^-1, gamma 0.95), the rule fixes in
     "learned_std": LEARNED | G95,
     "k0": LEARNED | G95 | K0,
     "kl_adaptive": LEARNED | G95 | {"ppo.desired_kl": 0.01},

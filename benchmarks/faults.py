@@ -1,4 +1,4 @@
-"""Fault injection (Part 10): a real training job — `paramimic train` with a local Ray, the API
+"""Fault injection: a real training job — `paramimic train` with a local Ray, the API
 and a Redis server this script owns (so that it can kill and restart it) — gets each fault
 injected several times at random moments; per fault it reports what happened.
 

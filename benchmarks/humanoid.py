@@ -57,6 +57,9 @@ from benchmarks.markdown import markdown_table  # noqa: E402
 
 DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
+SCREEN_MARK = ("<!-- screens -->", "<!-- /screens -->")
+SCREENS = RESULTS / "humanoid_screens"
+SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 
 # clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): docs/humanoid.md
 TARGETS = {
@@ -244,7 +247,7 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
            "report": report}  # fmt: skip
     tag = "_".join(x.replace("ppo.", "").replace("env.", "") for x in sets) or "shipped"
     tag = "".join(c if c.isalnum() or c in "._=-" else "" for c in tag)
-    path = RESULTS / "humanoid_screens" / f"{Path(config).stem}_{tag}_s{seed}.json"
+    path = SCREENS / f"{Path(config).stem}_{tag}_s{seed}.json"
     path.parent.mkdir(exist_ok=True)
     path.write_text(json.dumps(out, indent=2))
     print(f"{label} seed {seed}: {steps:,} steps in {seconds:.0f} s; up "
@@ -313,9 +316,40 @@ def table() -> dict:
             "mean": {k: float(np.mean([r["report"][k] for r in seeds])) for k in keys},
             "met": len(seeds) >= 3 and all(r["met"] for r in seeds),
         }
+    screens = [json.loads(p.read_text()) for p in sorted(SCREENS.glob("*.json"))]
+    out["screens"] = [
+        {k: r[k] for k in ("config", "label", "seed", "budget_s", "env_steps", "steps_per_s")}
+        | {k: r["report"][k] for k in SCREEN_KEYS}
+        for r in screens
+    ]
     (RESULTS / "humanoid.json").write_text(json.dumps(out, indent=2))
     _write_docs(rows)
+    _write_section(SCREEN_MARK, _screens_table(out["screens"]))
     return out
+
+
+def _screens_table(screens: list[dict]) -> str:
+    """The recipe screens, one row each, grouped by config and budget (a screen's numbers
+    compare only with screens of the same session and budget)."""
+    if not screens:
+        return "No screen has been run yet."
+    header = ["config", "variant", "seed", "budget", "env steps", "steps/s", "up (s of 30)",
+              "falls", "body error (m)"]  # fmt: skip
+    rows = [
+        [Path(r["config"]).stem, r["label"], r["seed"], f"{r['budget_s'] / 60:.0f} min",
+         f"{r['env_steps'] / 1e6:.2f}M", f"{r['steps_per_s']:,.0f}",
+         f"{r['mean_length_seconds']:.1f}", f"{r['fall_percent']:.0f} %",
+         f"{r['mean_body_error']:.3f}"]
+        for r in sorted(screens, key=lambda r: (r["config"], r["budget_s"], r["label"], r["seed"]))
+    ]  # fmt: skip
+    return markdown_table(header, rows)
+
+
+def _write_section(marks: tuple[str, str], body: str) -> None:
+    text = DOCS.read_text()
+    head, rest = text.split(marks[0], 1)
+    _, tail = rest.split(marks[1], 1)
+    DOCS.write_text(f"{head}{marks[0]}\n{body}\n{marks[1]}{tail}")
 
 
 def _write_docs(rows: dict[str, list]) -> None:
@@ -344,11 +378,7 @@ def _write_docs(rows: dict[str, list]) -> None:
         verdict = "met" if len(seeds) >= 3 and len(met) == len(seeds) else "not yet met"
         verdicts.append(f"- {config}: seeds {seeds} evaluated, {len(met)} meeting the target at "
                         f"their latest evaluation; the 3-seed target is {verdict}.")  # fmt: skip
-    text = DOCS.read_text()
-    head, rest = text.split(MARK[0], 1)
-    _, tail = rest.split(MARK[1], 1)
-    table = markdown_table(header, lines) + "\n\n" + "\n".join(verdicts)
-    DOCS.write_text(f"{head}{MARK[0]}\n{table}\n{MARK[1]}{tail}")
+    _write_section(MARK, markdown_table(header, lines) + "\n\n" + "\n".join(verdicts))
 
 
 def main() -> None:

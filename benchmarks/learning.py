@@ -15,9 +15,9 @@ Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs
     pip install -e ".[bench]"; python benchmarks/learning.py all [--steps 1000000] [--seeds 0,1,2]
     python benchmarks/learning.py ours_base --seed 1     # one stage
     python benchmarks/learning.py merge                  # summarize what is there
-    python benchmarks/learning.py targets [--run]        # Part 9's target rows (below)
+    python benchmarks/learning.py targets [--run]        # the family targets' rows (below)
 
-`targets` reads the result files behind each of Part 9's targets (walker_legs within 5M, adaptive
+`targets` reads the result files behind each of the family targets (walker_legs within 5M, adaptive
 vs uniform, biped_lower and quadruped at x0.5 ranges, the base biped at 2M, [L21] walker_jump's
 explored ratio, `make train`'s end) and writes benchmarks/results/targets.json: per row the
 target, the measurement, the seeds it rests on, met or missed, and the command that makes it.
@@ -323,7 +323,7 @@ def _falls_row(variant: str, millions: int, at_most: float, extra: str = "") -> 
 
 
 def targets() -> list[dict]:
-    """Part 9's target rows from the result files (see the module docstring)."""
+    """The family targets' rows from the result files (see the module docstring)."""
     rows = []
     shipped, uniform_twin, millions = SHIPPED
     legs = _falls_row(shipped, millions, 10.0)

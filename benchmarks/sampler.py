@@ -1,4 +1,4 @@
-"""Sampler and API latency (issue: Part 3 benchmark). Not a timed test.
+"""Sampler and API latency. Not a timed test.
 
 1. The sampler actor on a local Ray with an embedded Redis, with 10^3, 10^4 and 10^5 ingested
    episodes stored: latency of `next_tasks(64)` and of ingesting a batch of 16 new episode

@@ -1,5 +1,5 @@
-"""Actors on one Ray node against actors spread over two nodes, with the same total cores
-(issue: Part 5 benchmark). Not a timed test.
+"""Actors on one Ray node against actors spread over two nodes, with the same total cores.
+Not a timed test.
 
 - one node: a `ray start --head` node with 2 CPUs; both actors on it, beside the learner.
 - two nodes: a head with 0 CPUs (the learner's node) and two worker nodes of 1 CPU each, each

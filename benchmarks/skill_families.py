@@ -1,4 +1,4 @@
-"""Part 13: how far each shipped [L21] skill family gets at a laptop budget, beside the paper's.
+"""How far each shipped [L21] skill family gets at a laptop budget, beside the paper's.
 
 Each family config (declared task parameters from the measure library, `paramimic clip info`
 for a0) trains with the exploration/refinement curriculum for a fixed number of env steps on the

@@ -1,4 +1,4 @@
-"""Throughput on the walker, in one run (issue: Part 2 benchmark). Not a timed test.
+"""Throughput on the walker and its peers, in one run. Not a timed test.
 
 (a) raw `mj_step` loop of the same model and frame skip, control steps/s (the ceiling);
 (b) one rollout actor stepping its envs without a policy (zero actions);

@@ -382,7 +382,7 @@ def render(
 def upgrade_checkpoint(
     path: Annotated[Path, typer.Argument(help="a checkpoint file or run directory you trust")],
 ) -> None:
-    """Rewrite a checkpoint of paramimic before Part 10 (pickled numpy) as plain data, in place.
+    """Rewrite a checkpoint of the pickled-numpy format (older paramimic) as plain data, in place.
 
     It unpickles the file once, which can run code: only for files you made yourself."""
     from services.learner import checkpoint

@@ -108,7 +108,7 @@ def test_every_read_endpoint(api, run):
         assert cur["mode"] == "adaptive" and cur["k"] == 10.0 and cur["mu"] == 4.0
         assert cur["refills"] == 3 and cur["buffer_adaptive"] and cur["buffer_size"] == 50
         assert cur["episodes"] == 6 and cur["tasks_served"] == 12 and not cur["paused"]
-        assert cur["phase"] is None  # [L21] phases arrive with Part 4
+        assert cur["phase"] is None  # no [L21] phase on a [WL19] run
 
         g = c.get(f"/runs/{run}/curriculum/marginal-value").json()
         assert g["available"] and g["dims"] == ["leg_length", "torso_length"]
@@ -216,7 +216,7 @@ def test_skill_endpoints(api, run, skill_run):
 
 def test_a_run_lists_its_parameters_by_name_unit_and_measure(api, run, skill_run, redis_server,
                                                               tmp_path):  # fmt: skip
-    """Part 13: GET /runs/{run} names every task parameter with its unit and meaning."""
+    """GET /runs/{run} names every task parameter with its unit and meaning."""
     with httpx.Client(base_url=api) as c:
         wl19 = c.get(f"/runs/{run}").json()
         assert wl19["name"] == "api-test" and wl19["config"]["character"] == "hopper"

@@ -1,4 +1,4 @@
-"""Part 10: the API can't be starved or confused by one client or by damaged state — a real
+"""The API can't be starved or confused by one client or by damaged state — a real
 uvicorn (`paramimic api`) over its own real Redis server."""
 
 from __future__ import annotations
@@ -110,7 +110,7 @@ def test_redis_down_is_503_with_retry_after_and_no_address(stack):
 
 
 def test_redis_retries_end_at_their_wall_clock_limit(tmp_path):
-    """Part 10 item 6: a Redis that stops answering (SIGSTOP: the socket stays open, each
+    """A Redis that stops answering (SIGSTOP: the socket stays open, each
     attempt would wait for its timeout) fails a command after about `retry_seconds`."""
     import os
     import signal

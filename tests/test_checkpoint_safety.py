@@ -1,4 +1,4 @@
-"""Part 10: checkpoints hold plain data, load without running code, and are only written from a
+"""Checkpoints hold plain data, load without running code, and are only written from a
 consistent, finite state; a damaged latest.pt falls back to the newest readable ckpt file."""
 
 import os
@@ -87,7 +87,7 @@ def test_old_pickled_checkpoints_say_how_to_convert_and_convert(tmp_path):
     latest = checkpoint.checkpoint_dir(tmp_path) / checkpoint.LATEST
     state = checkpoint.load(tmp_path)
     old = checkpoint.checkpoint_dir(tmp_path) / "ckpt_old.pt"
-    torch.save(state, old)  # numpy arrays pickled: the format before Part 10
+    torch.save(state, old)  # numpy arrays pickled: the older format
     with pytest.raises(checkpoint.CheckpointError, match="upgrade-checkpoint"):
         checkpoint.load(old)
     env = os.environ | {"PYTHONPATH": str(ROOT)}

@@ -57,13 +57,13 @@ def _write(tmp_path, text):
         ("env: {physics_hz: 200}", "env", "physics_hz (200) must be a multiple of control_hz"),
         ("train: {torch_threads: 0}", "train.torch_threads", "must be >= 1 or 'auto'"),
         ("env: {physics_hz: 300, frame_skip: 20}", "env", "frame_skip 20 != physics_hz"),
-        # Part 10: no NaN/inf anywhere, shapes within what the character supports, seeds >= 0
+        # no NaN/inf anywhere, shapes within what the character supports, seeds >= 0
         ("ppo: {gamma: .nan}", "ppo.gamma", "finite number"),
         ("curriculum: {k: .inf}", "curriculum.k", "finite number"),
         ("task: {left_leg_length: [0.8, .inf]}", "task.left_leg_length", "finite number"),
         ("task: {left_leg_length: [0.8, 2.5]}", "task.left_leg_length", "supports, [0.5, 1.5]"),
         ("train: {seed: -1}", "train.seed", "greater than or equal to 0"),
-        # Part 9: a family's shape ranges shrunk toward the base body
+        # a family's shape ranges shrunk toward the base body
         ("shape_scale: 0.5", "(config)", "shape_scale: shrinks the documented shape ranges"),
         ("shape_space: full\nshape_scale: 1.5", "shape_scale", "less than or equal to 1"),
     ],
@@ -139,7 +139,7 @@ SKILL_CONFIGS = [p for p in CONFIGS if "clip:" in p.read_text()]
 
 @pytest.mark.parametrize("path", SKILL_CONFIGS, ids=lambda p: p.name)
 def test_shipped_skill_families_build_with_their_declared_measures(path):
-    """Part 13: each shipped [L21] family builds its env; every declared parameter is measured
+    """Each shipped [L21] family builds its env; every declared parameter is measured
     (a0 from the clip inside the task box, `reference` units at 1)."""
     import yaml
 

@@ -114,7 +114,7 @@ def test_a_skill_run_page_shows_every_elite_and_the_density(
                                     "return d && d.data ? d.data.length : 0") == n_traces,
                60, "the elite scatter")  # fmt: skip
     assert _points(browser, "task-map", n_traces - 1) == elites["total"] >= 3
-    # Part 13: the task parameters by name, unit and measure, with the latest a'
+    # the task parameters by name, unit and measure, with the latest a'
     rows = _js(browser, "return [...document.querySelectorAll('#parameters tr[data-name]')]"
                         ".map(r => r.innerText)")  # fmt: skip
     assert rows[0].startswith("gravity") and "G" in rows[0]

@@ -1,4 +1,4 @@
-"""Part 11 item 3: `paramimic export` gives the policy the actors run, as ONNX (run by
+"""`paramimic export` gives the policy the actors run, as ONNX (run by
 onnxruntime) and TorchScript, with a sidecar whose observation layout adds up."""
 
 import json

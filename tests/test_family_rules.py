@@ -1,5 +1,5 @@
-"""The rules a family of bodies is judged and observed by ([WL19]; Part 9 defects 1-5): each
-test fails on the rules before Part 9 and passes after."""
+"""The rules a family of bodies is judged and observed by ([WL19]): each
+test fails on the rules as first shipped and passes on today's."""
 
 import math
 

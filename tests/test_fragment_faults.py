@@ -1,4 +1,4 @@
-"""Part 10 items 5-6 on a real local Ray: every fragment error has a defined outcome, nothing
+"""On a real local Ray: every fragment error has a defined outcome, nothing
 waits forever, and a stop request is honoured while the learner waits for actors."""
 
 from __future__ import annotations

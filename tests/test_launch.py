@@ -113,7 +113,7 @@ def _alive(p: psutil.Process) -> bool:
 
 
 def _assert_locked_down(launch: Launch) -> None:
-    """Part 10: the embedded Redis wants its per-launch password, the local Ray its token, and
+    """The embedded Redis wants its per-launch password, the local Ray its token, and
     neither secret is on any command line of what the launcher started."""
     conf = (launch.run_dir / "redis" / "redis.conf").read_text()
     password = re.search(r'requirepass "(.+)"', conf).group(1)
@@ -315,7 +315,7 @@ def test_an_external_redis_with_a_password_is_used_and_left_running(tmp_path):
 def test_a_run_has_one_owner_and_a_killed_launcher_takes_its_children(
     tmp_path, api_url, redis_server
 ):
-    """Part 10 item 8: a second learner on the run dir is refused; SIGKILL of the launcher takes
+    """A second learner on the run dir is refused; SIGKILL of the launcher takes
     the embedded Redis and the API with it (PDEATHSIG), so --resume starts cleanly; a learner
     that stops renewing its lease shows as `stale`."""
     launch = Launch(tmp_path)

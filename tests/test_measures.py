@@ -1,4 +1,4 @@
-"""Part 13: the measure library worked out by hand on constructed trajectories — a body turning at
+"""The measure library worked out by hand on constructed trajectories — a body turning at
 a known rate, a point rising to a known height, a body leaving the ground at a known instant."""
 
 from __future__ import annotations

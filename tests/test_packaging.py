@@ -1,4 +1,4 @@
-"""Part 12: the build stays supported (no setuptools deprecations: an SPDX license string and a
+"""The build stays supported (no setuptools deprecations: an SPDX license string and a
 setuptools floor that knows it), and the constraints file pins what pyproject asks for."""
 
 import re

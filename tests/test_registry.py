@@ -109,7 +109,7 @@ def test_a_serial_trainer_updates_on_every_core(tmp_path):
 
 
 def test_import_paramimic_registers_the_gym_envs_cheaply():
-    """Part 12: `import paramimic` is enough for gym.make (as gymnasium plugins do), without
+    """`import paramimic` is enough for gym.make (as gymnasium plugins do), without
     MuJoCo, torch, Ray or Redis; its id table equals the registry's."""
     import json
     import subprocess

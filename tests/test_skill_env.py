@@ -190,7 +190,7 @@ def test_motion_trace_displaces_m0_as_eq2():
 
 
 def test_declared_measures_pay_their_rewards_and_relabel_by_the_same_measure():
-    """Part 13: a take-off energy (spike at take-off, in multiples of m0's) and a foot's peak
+    """A take-off energy (spike at take-off, in multiples of m0's) and a foot's peak
     height (continuous) declared in the config: each is paid as declared, a' and a0 come from
     the same measure."""
     measures = {

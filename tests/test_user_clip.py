@@ -1,4 +1,4 @@
-"""Part 13: a clip is a file or a name. A user's DeepMimic-format clip file that is not in the
+"""A clip is a file or a name. A user's DeepMimic-format clip file that is not in the
 repo, with two task parameters declared from the measure library, trains on a real local Ray
 with the sampler in Redis and reports a' for both; bad files fail before anything starts,
 naming the problem; `paramimic clip info` reads a file the same way and measures m0."""

@@ -1,4 +1,4 @@
-"""A family trained from its base body's controller (`train.init_from`, Part 9)."""
+"""A family trained from its base body's controller (`train.init_from`)."""
 
 import math
 

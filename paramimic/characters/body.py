@@ -277,7 +277,7 @@ def add_hinge(body: mujoco.MjsBody, joint: Joint) -> None:
     servos (whose gains do not scale with the body) stable on light limbs. Scaled as the limb's
     own inertia (∝ L³w²), biped_lower and the quadruped at their half-size corners diverged
     under random actions at 600 Hz and could not hold their reference pose
-    (tests/test_assorted_characters.py, tried in Part 9). At half size the armature is a
+    (tests/test_assorted_characters.py). At half size the armature is a
     larger share of a limb's inertia than on the base body: small bodies swing their limbs
     more sluggishly than volume alone would say."""
     body.add_joint(

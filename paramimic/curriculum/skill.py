@@ -392,7 +392,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.batch_count = int(core.pop("batch_count"))
         self.history = [tuple(h) for h in core.pop("history")]
         self.improvements = int(core.pop("improvements"))
-        self.achieved = core.pop("achieved", [])  # absent in states saved before Part 13
+        self.achieved = core.pop("achieved", [])  # absent in older states
         super().from_state(state | {"core": core})
         self.elites.from_state(state["elites"])
         m = state["motion"]

@@ -1,1 +1,1 @@
-"""Rollout actors on Ray (Part 2): thin shells around paramimic.rl.rollout.RolloutWorker."""
+"""Rollout actors on Ray: thin shells around paramimic.rl.rollout.RolloutWorker."""

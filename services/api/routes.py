@@ -162,7 +162,7 @@ async def run_detail(run: RunId, r: RedisDep):
         raise _not_found(run)
     config = json.loads(meta["config"] or "{}")  # damaged JSON: 409 (app.damaged_state)
     params = json.loads(meta["parameters"]) if meta["parameters"] else None
-    if params is None:  # runs registered before Part 13 stored ranges only
+    if params is None:  # runs registered by older versions stored ranges only
         params = [{"name": n, "range": list(v), "constraint": v[0] == v[1], "kind": "unknown",
                    "unit": ""} for n, v in config.get("task", {}).items()]  # fmt: skip
     return RunDetail(

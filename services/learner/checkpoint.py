@@ -151,8 +151,8 @@ def read(file: Path) -> dict:
     except pickle.UnpicklingError as e:
         raise CheckpointError(
             f"{file} is not a plain-data checkpoint and was not loaded (it would need to unpickle "
-            f"objects, which can run code). If it is a checkpoint of paramimic before Part 10 "
-            f"that you trust, convert it with `paramimic upgrade-checkpoint {file}`. ({e})"
+            f"objects, which can run code). If it is a checkpoint of an older paramimic (pickled "
+            f"numpy) that you trust, convert it with `paramimic upgrade-checkpoint {file}`. ({e})"
         ) from None
     except (RuntimeError, EOFError, OSError, ValueError) as e:
         raise CheckpointError(f"{file} is damaged or truncated: {e}") from None
