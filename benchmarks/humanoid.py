@@ -376,8 +376,18 @@ def _write_docs(rows: dict[str, list]) -> None:
             if max((r for r in runs if r["train_seed"] == s), key=lambda r: r["env_steps"])["met"]
         ]
         verdict = "met" if len(seeds) >= 3 and len(met) == len(seeds) else "not yet met"
-        verdicts.append(f"- {config}: seeds {seeds} evaluated, {len(met)} meeting the target at "
-                        f"their latest evaluation; the 3-seed target is {verdict}.")  # fmt: skip
+        latest = [
+            max((r for r in runs if r["train_seed"] == s), key=lambda r: r["env_steps"])["report"]
+            for s in seeds
+        ]
+        mean = {k: float(np.mean([r[k] for r in latest])) for k in
+                ("fall_percent", "mean_body_error", "speed_ratio", "mean_root_drift")}  # fmt: skip
+        verdicts.append(
+            f"- {config}: seeds {seeds} evaluated, {len(met)} meeting the target at their latest "
+            f"evaluation; the 3-seed target is {verdict}. Mean of the latest: falls "
+            f"{mean['fall_percent']:.1f} %, body error {mean['mean_body_error']:.3f} m, speed "
+            f"{mean['speed_ratio']:.2f}x the clip's, root drift {mean['mean_root_drift']:.2f} m."
+        )
     _write_section(MARK, markdown_table(header, lines) + "\n\n" + "\n".join(verdicts))
 
 
