@@ -36,7 +36,7 @@ def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dic
     import torch
 
     from paramimic.config import load_config
-    from services.learner.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import SerialBackend, Trainer
 
     cfg = load_config(
         ROOT / config,
@@ -97,7 +97,7 @@ def _run_job(job: tuple) -> dict:
 def final_elites(run_dir: Path) -> dict:
     """The elite set in the run's last checkpoint: names, params a', fitness, and per task
     dimension the range the elites cover."""
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     state = checkpoint.load(checkpoint.resolve(run_dir))
     table = state["curriculum"]["elites"]

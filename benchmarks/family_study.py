@@ -337,8 +337,8 @@ def run(variant: str, seed: int, steps: int) -> dict:
     warnings.filterwarnings("ignore")
     from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
-    from services.learner import checkpoint
-    from services.learner.trainer import SerialBackend, Trainer
+    from paramimic.training import checkpoint
+    from paramimic.training.trainer import SerialBackend, Trainer
 
     run_dir = RUNS / f"{variant}_s{seed}"
     config, variant_overrides = variant_config(variant, seed)
@@ -377,7 +377,7 @@ def run(variant: str, seed: int, steps: int) -> dict:
 def _run_state(variant: str, seed: int) -> tuple[dict, dict]:
     """A study run's latest checkpoint and its config's env section."""
     from paramimic.config import ExperimentConfig
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     state = checkpoint.load(RUNS / f"{variant}_s{seed}")
     return state, ExperimentConfig.model_validate(state["config"]).env.model_dump()
@@ -390,7 +390,7 @@ def _adopted(state: dict, cfg):
 
     from paramimic.config import ExperimentConfig
     from paramimic.rl.ppo import PPOLearner, adopt_controller
-    from services.learner.trainer import reset_observations
+    from paramimic.training.trainer import reset_observations
 
     source = ExperimentConfig.model_validate(state["config"])
     learner = PPOLearner(state["obs_dim"], state["act_dim"], source.ppo)
@@ -782,7 +782,7 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
     from paramimic.envs import make_env
     from paramimic.evaluation import deterministic
     from paramimic.rl.networks import ActorCritic
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     state = checkpoint.load(RUNS / f"{variant}_s{seed}")
     cfg = ExperimentConfig.model_validate(state["config"])

@@ -91,7 +91,7 @@ def load_run(run: Path):
     """(checkpoint state, config, policy in eval mode) of a run directory or checkpoint."""
     from paramimic.config import ExperimentConfig
     from paramimic.rl.networks import ActorCritic
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     state = checkpoint.load(run)
     cfg = ExperimentConfig.model_validate(state["config"])

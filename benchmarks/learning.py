@@ -59,7 +59,7 @@ def _train_ours(
 
     from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
-    from services.learner.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import SerialBackend, Trainer
 
     cfg = load_config(
         ROOT / config, {**overrides, "train.run_dir": str(run_dir), "train.seed": seed}

@@ -151,7 +151,7 @@ def learning(config: str, hz: int, seed: int, budget: float) -> dict:
 
     from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
-    from services.learner.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import SerialBackend, Trainer
 
     run_dir = ROOT / "runs" / "bench" / f"physics_{Path(config).stem}_{hz}_s{seed}"
     overrides = {"env.physics_hz": hz, "train.run_dir": str(run_dir), "train.seed": seed}

@@ -20,7 +20,7 @@ import warnings
 from pathlib import Path
 
 from paramimic.config import load_config
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training.trainer import SerialBackend, Trainer
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent

@@ -260,7 +260,8 @@ def main() -> None:
     for name, v in ratios.items():
         print(f"{name:45s} {v:8.2f}")
     for path, peer in peers.items():
-        print(path, {k: round(v["steps_per_s"]) for k, v in peer.items() if "steps_per_s" in v})
+        print(path, {k: round(v["steps_per_s"]) for k, v in peer.items()
+                     if isinstance(v, dict) and "steps_per_s" in v})  # fmt: skip
         print(path, {k: round(v, 2) for k, v in peer.items() if isinstance(v, float)})
     print(f"wrote {args.out}")
 

@@ -112,7 +112,7 @@ def train(
     if not 0 <= api_port < 65536:
         _fail(f"--api-port must be in 0..65535, got {api_port}")
     if resume_if_exists:
-        from services.learner import checkpoint
+        from paramimic.training import checkpoint
 
         resume = (checkpoint.checkpoint_dir(cfg.resolved_run_dir()) / checkpoint.LATEST).exists()
     options = LaunchOptions(
@@ -220,7 +220,7 @@ def evaluate_cmd(
     """Fall %, task achievement, returns and uniformity of a trained controller."""
     from paramimic.envs import make_env
     from paramimic.evaluation import deterministic, evaluate
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     if episodes < 1 or grid < 1 or num_envs < 1:
         _fail("--episodes, --grid and --num-envs must be positive")
@@ -286,7 +286,7 @@ def _load_policy(run: Path, seconds: float | None = None):
     """(config, policy in eval mode, checkpoint state) of a run directory, a checkpoint or the
     name of a shipped controller (`paramimic controllers list`)."""
     from paramimic.rl.networks import ActorCritic
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     try:
         state = checkpoint.load(_run_path(run))
@@ -385,7 +385,7 @@ def upgrade_checkpoint(
     """Rewrite a checkpoint of the pickled-numpy format (older paramimic) as plain data, in place.
 
     It unpickles the file once, which can run code: only for files you made yourself."""
-    from services.learner import checkpoint
+    from paramimic.training import checkpoint
 
     try:
         console.print(f"upgraded {checkpoint.upgrade(path)}")
@@ -446,7 +446,8 @@ def controllers_list() -> None:
     """The shipped controllers: name, config, character, gait or clip, env steps trained."""
     from rich.table import Table
 
-    from services.learner import checkpoint, controllers
+    from paramimic.training import checkpoint
+    from services.learner import controllers
 
     table = Table("name", "config", "character", "motion", "env steps")
     for name in controllers.names():
@@ -468,7 +469,8 @@ def controllers_add(
 ) -> None:
     """Ship a run's controller: its config, policy and V̄ (no optimizer or sampler state) as a
     small weights-only file that play, render and eval take by name."""
-    from services.learner import checkpoint, controllers
+    from paramimic.training import checkpoint
+    from services.learner import controllers
 
     try:
         path = controllers.add(run, name, folder)

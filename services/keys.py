@@ -44,17 +44,21 @@ class RunKeys:
         if not RUN_ID.match(run_id):
             raise ValueError(f"invalid run id {run_id!r}: letters, digits, '_', '.', '-'")
         self.run_id = run_id
-        base = f"{PREFIX}:run:{run_id}"
+        self.base = base = f"{PREFIX}:run:{run_id}"
         self.meta = f"{base}:meta"
         self.progress = f"{base}:progress"
         self.history = f"{base}:history"
         self.curriculum = f"{base}:curriculum"
         self.seen = f"{base}:seen"
-        self.traces = f"{base}:traces"
+        self.traces = self.part("traces")
         self.samples = f"{base}:samples"
         self.events = f"{base}:events"
         self.control = f"{base}:control"
         self.lease = f"{base}:lease"
+
+    def part(self, name: str) -> str:
+        """The hash of a curriculum state part kept entry by entry (the [L21] `traces`)."""
+        return f"{self.base}:{name}"
 
 
 class SamplerUnavailable(RuntimeError):

@@ -38,21 +38,20 @@ class Session:
         from paramimic.envs import make_env
         from paramimic.render import Camera
         from paramimic.task_space import TaskSpace
+        from paramimic.training.method import method_for
 
         self.cfg = cfg
         self.env = make_env(cfg.character, cfg.task, cfg.env)
         self.space: TaskSpace = self.env.task_space
         self.act = policy.numpy_policy()
         self.camera = Camera(width, height)
-        self.skill = cfg.env.clip is not None
+        method = method_for(cfg)
+        self.kind = method.play_kind
         self.marginal = MarginalValue(self.space, cfg.curriculum.marginal_hidden)
         self.marginal.from_state(state["marginal"])
         self.curriculum = None
-        if self.skill:  # P_θ and the bootstrap stage, to deal m_a for "perform"
-            from paramimic.curriculum.skill import new_curriculum
-            from paramimic.envs.skill_env import clip_setup
-
-            self.curriculum = new_curriculum(cfg, clip_setup(cfg))
+        if self.kind == "skill":  # P_θ and the bootstrap stage, to deal m_a for "perform"
+            self.curriculum = method.new_curriculum()
             self.curriculum.from_state(state["curriculum"])
         self.shape_names = {n for n, _ in self.env._shape_idx}
         self.units = {p["name"]: p["unit"] for p in cfg.parameters()}
@@ -97,7 +96,7 @@ class Session:
             shape = {n: v for n, v in values.items() if n in self.shape_names}
             if shape:  # the body changes on the fly ([WL19] §5.2), in both kinds of run
                 self.obs = self.env.set_shape(shape)
-            if self.skill:  # [L21] goals and conditions take effect at the next `perform`
+            if self.kind == "skill":  # [L21] goals and conditions act at the next `perform`
                 return
             for name, value in values.items():
                 if name in TASK_GOALS:
@@ -176,7 +175,7 @@ class Session:
             body = self.env.character
             return {
                 "run": self.cfg.name, "character": self.cfg.character,
-                "kind": "skill" if self.skill else "family",
+                "kind": self.kind,
                 "task": task, "ranges": self.space.ranges(),
                 "shape_params": sorted(self.shape_names),
                 "goals": [n for n in self.space.names if n not in self.shape_names],

@@ -127,8 +127,8 @@ def skill_run(redis_server, tmp_path_factory):
     """An [L21] run: real SkillEnv episodes (tracking m0) ingested by the real sampler service."""
     from paramimic.config import ExperimentConfig
     from paramimic.envs import make_env
-    from paramimic.envs.skill_env import clip_setup
     from paramimic.rl.rollout import RolloutWorker
+    from paramimic.training.method import method_for
     from services.learner.reporter import RunReporter
     from services.sampler.service import SamplerService
 
@@ -138,7 +138,10 @@ def skill_run(redis_server, tmp_path_factory):
         cfg, tmp_path_factory.mktemp("skill-run"), 1000, None
     )
     sampler = SamplerService(
-        cfg.model_dump(mode="json"), redis_server.url, run_id, clip=clip_setup(cfg)
+        cfg.model_dump(mode="json"),
+        redis_server.url,
+        run_id,
+        clip=method_for(cfg).spaces.clip_setup(),
     )
     sampler.update_motion(None, 0, None, "proxy")  # past π0: tasks uniform over the box
     probe = make_env(cfg.character, cfg.task, cfg.env)

@@ -12,8 +12,8 @@ import pytest
 import torch
 
 from paramimic.config import ExperimentConfig
-from services.learner import checkpoint
-from services.learner.trainer import SerialBackend, Trainer, TrainingDiverged
+from paramimic.training import checkpoint
+from paramimic.training.trainer import SerialBackend, Trainer, TrainingDiverged
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -274,7 +274,7 @@ def test_a_clip_gait_family_changes_shape_on_the_fly():
 def test_deviated_episodes_are_reported_as_such_not_as_falls():
     """The training metrics count deviations apart from falls (episode_metrics)."""
     from paramimic.rl.rollout import RolloutWorker
-    from services.learner.trainer import episode_metrics
+    from paramimic.training.trainer import episode_metrics
 
     cfg = GAIT | {"deviation_limit": 0.3, "max_episode_seconds": 3.0}
     w = RolloutWorker(lambda: make_env("humanoid", {}, cfg), 2, 1, 28, seed=0)

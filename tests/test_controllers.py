@@ -8,7 +8,8 @@ import pytest
 import torch
 from test_cli import _cli, _train_serial
 
-from services.learner import checkpoint, controllers
+from paramimic.training import checkpoint
+from services.learner import controllers
 
 WALK = {
     "name": "tiny_walk",

@@ -14,7 +14,7 @@ import torch
 from paramimic.characters import REGISTRY
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training.trainer import SerialBackend, Trainer
 
 ROOT = Path(__file__).resolve().parent.parent
 

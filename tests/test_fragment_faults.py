@@ -13,9 +13,9 @@ import ray
 from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
+from paramimic.training.trainer import StopRequested
 from services.actors.rollout_actor import RolloutActor
 from services.learner.ray_backend import FragmentsFailing, SamplerClient, SamplerFailed
-from services.learner.trainer import StopRequested
 
 
 def _cfg(**actors) -> ExperimentConfig:

@@ -20,6 +20,7 @@ LAYERS = [
     ("paramimic.envs",),
     ("paramimic.rl", "paramimic.curriculum"),
     ("paramimic.evaluation", "paramimic.render"),
+    ("paramimic.training",),
 ]
 # Only modules that hold networks load torch.
 TORCH_MODULES = {
@@ -27,6 +28,8 @@ TORCH_MODULES = {
     "paramimic.rl.ppo",
     "paramimic.curriculum.marginal_value",
     "paramimic.curriculum.parameterization_net",
+    "paramimic.training.trainer",  # PPO, V̄ and P_θ on torch's threads
+    "paramimic.training.checkpoint",  # tensors on disk
 }
 # services/<kind>/ import the library and these shared modules, not each other's packages;
 # the launcher and the CLI compose them.

@@ -101,7 +101,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
     from fastapi.testclient import TestClient
 
     from paramimic.config import load_config
-    from services.learner.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import SerialBackend, Trainer
     from services.play import Session, create_app
 
     def trained(config: str, overrides: dict):

@@ -10,8 +10,8 @@ import ray
 from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
-from services.learner import checkpoint
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training import checkpoint
+from paramimic.training.trainer import SerialBackend, Trainer
 
 
 def _cfg(**actors) -> ExperimentConfig:

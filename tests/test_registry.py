@@ -11,7 +11,7 @@ from paramimic.characters.body import CharacterDef, Joint, Segment, ShapeParam
 from paramimic.config import ExperimentConfig
 from paramimic.envs import register, registered_envs
 from paramimic.motion.procedural import gait
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training.trainer import SerialBackend, Trainer
 
 # --- a toy character, as a user would add one: a torso on one stiff-kneed leg ---------------
 

@@ -48,9 +48,13 @@ def test_elites_keep_their_traces_and_replace_worse_neighbours():
     assert set(c.traces) == {"e0"}
     c.ingest([episode(4, (0.51, 0.5), 0.7, trace_value=4.0)])  # better: replaces e0
     assert set(c.traces) == {"e4"}
-    added, removed = c.drain_traces()
+    assert c.pending_parts() == ("elites",)  # the sampler persists the elite set
+    added, removed = c.drain("traces")
     assert set(added) == {"e4"} and removed == {"e0"}
-    assert c.drain_traces() == ({}, set())
+    assert added["e4"] == np.full(SHAPE, 4.0).tolist()  # JSON-able for Redis
+    assert c.drain("traces") == ({}, set()) and c.pending_parts() == ()
+    assert c.entries("traces") == {"e4": np.full(SHAPE, 4.0).tolist()}
+    assert set(c.views(["elites"], 5)) == {"density"}
     params, traces = c.elite_data()
     assert params.tolist() == [[0.51, 0.5]] and traces.shape == (1, *SHAPE)
     assert c.stats["episodes"] == 5

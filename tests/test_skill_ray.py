@@ -9,7 +9,7 @@ import ray
 import redis
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs.skill_env import clip_setup
+from paramimic.training.method import method_for
 from services.keys import RunKeys
 from services.launch.stack import ray_stack
 from services.learner.reporter import RunReporter
@@ -66,7 +66,11 @@ def test_walker_jump_on_ray_fills_elites_in_redis_and_the_api(
     assert min(elites["fitness"]) > 0.1
     # a sampler started again on the same run reloads exactly this state, traces included
     again = SamplerService(
-        cfg.model_dump(mode="json"), redis_server.url, run_id, True, clip=clip_setup(cfg)
+        cfg.model_dump(mode="json"),
+        redis_server.url,
+        run_id,
+        True,
+        clip=method_for(cfg).spaces.clip_setup(),
     )
     assert again.digest() == digest
 

@@ -9,8 +9,8 @@ import torch
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
 from paramimic.evaluation import deterministic, run_episodes
-from services.learner import checkpoint
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training import checkpoint
+from paramimic.training.trainer import SerialBackend, Trainer
 
 
 def _config(**train) -> ExperimentConfig:

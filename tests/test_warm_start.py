@@ -8,7 +8,7 @@ import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
-from services.learner.trainer import SerialBackend, Trainer
+from paramimic.training.trainer import SerialBackend, Trainer
 
 
 def _config(tmp_path, name: str, legs: tuple[float, float], **train) -> ExperimentConfig:

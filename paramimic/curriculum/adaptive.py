@@ -151,6 +151,27 @@ class AdaptiveCurriculum:
             raise ValueError(f"k must be >= 0, got {k}")
         self.sampler.k = float(k)
 
+    # --- what the sampler persists, besides `to_state` --------------------------------------
+
+    ENTRY_PARTS: tuple[str, ...] = ()  # parts kept entry by entry (`drain`, `entries`)
+
+    def pending_parts(self) -> tuple[str, ...]:
+        """Parts that the latest `ingest` changed besides "core" (none here)."""
+        return ()
+
+    def drain(self, part: str) -> tuple[dict, set[str]]:
+        """Entries of an `ENTRY_PARTS` part added (JSON-able) and removed since the last call."""
+        raise KeyError(part)
+
+    def entries(self, part: str) -> dict:
+        """Every entry of an `ENTRY_PARTS` part (JSON-able)."""
+        raise KeyError(part)
+
+    def views(self, parts: Iterable[str], n: int = 21) -> dict:
+        """The public snapshots that depend on `parts` (written beside the summary): V̄ over the
+        display dims when the marginal changed."""
+        return {"grid": self.marginal_grid(n)} if "marginal" in parts else {}
+
     # --- views ----------------------------------------------------------------------------------
 
     def marginal_grid(self, n: int = 21) -> dict | None:

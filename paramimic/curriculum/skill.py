@@ -16,7 +16,7 @@ Pure and serialisable like `AdaptiveCurriculum`, whose V̄, μ, k and counters i
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -86,7 +86,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         cls, cfg: ExperimentConfig, trace_shape: Sequence[int], reference: Sequence[float]
     ) -> SkillCurriculum:
         """The curriculum of an experiment; the clip's trace shape and its parameter a0 come
-        from the env layer (`paramimic.envs.skill_env.clip_setup`), the config's
+        from the env (`SkillEnv.clip_setup`, via `paramimic.training.method.L21`), the config's
         `curriculum.skill.reference` overriding entries of a0."""
         space = TaskSpace.from_ranges(cfg.task)
         reference = np.array(reference, np.float64)
@@ -262,11 +262,28 @@ class SkillCurriculum(AdaptiveCurriculum):
         del self.history[:-HISTORY]
         record["closed"] = rate
 
-    def drain_traces(self) -> tuple[dict[str, np.ndarray], set[str]]:
-        """Traces added and removed since the last call (the service writes them to Redis)."""
+    ENTRY_PARTS = ("traces",)  # one entry per elite: written as the elite set changes
+
+    def pending_parts(self) -> tuple[str, ...]:
+        return ("elites",) if self.added or self.removed else ()
+
+    def drain(self, part: str) -> tuple[dict, set[str]]:
+        """Traces added (as lists) and removed since the last call."""
+        if part != "traces":
+            raise KeyError(part)
         added, removed = self.added, self.removed
         self.added, self.removed = {}, set()
-        return added, removed
+        return {k: v.tolist() for k, v in added.items()}, removed
+
+    def entries(self, part: str) -> dict:
+        if part != "traces":
+            raise KeyError(part)
+        return {k: v.tolist() for k, v in self.traces.items()}
+
+    def views(self, parts: Iterable[str], n: int = 21) -> dict:
+        """Also the elites' density (Eq. 15) when the elite set changed."""
+        out = super().views(parts, n)
+        return out | ({"density": self.density_grid(n)} if "elites" in parts else {})
 
     # --- the learner's calls ------------------------------------------------------------------
 
@@ -401,17 +418,3 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.traces = {k: np.asarray(v, np.float64) for k, v in state["traces"].items()}
         self.added, self.removed = {}, set()
         self._density = None
-
-
-def new_curriculum(cfg: ExperimentConfig, clip: Mapping | None = None) -> AdaptiveCurriculum:
-    """The curriculum an experiment runs: [L21] with a clip, else [WL19] adaptive sampling.
-    `clip` ({"trace_shape", "reference"}, from `paramimic.envs.skill_env.clip_setup`) is what
-    the [L21] curriculum needs to know of the clip without building an env."""
-    if cfg.env.clip is None:
-        return AdaptiveCurriculum.from_config(cfg)
-    if clip is None:
-        raise ValueError(
-            "the [L21] curriculum needs the clip's trace shape and reference a0: "
-            "pass clip=paramimic.envs.skill_env.clip_setup(cfg)"
-        )
-    return SkillCurriculum.from_config(cfg, clip["trace_shape"], clip["reference"])

@@ -31,7 +31,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
-from paramimic.config import ExperimentConfig
 from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
 from paramimic.messages import SkillOutcome, StepInfo
@@ -56,12 +55,6 @@ class TaskMeasure:
     reward: str  # "spike" or "continuous"
     event: str  # when a spike is paid: clip_end, takeoff, window_end
     sigma: float  # σ_task of Eq. 8 in the parameter's unit
-
-
-def clip_setup(cfg: ExperimentConfig) -> dict:
-    """What the [L21] curriculum needs to know of an experiment's clip without building an env:
-    {"trace_shape": (bins, D), "reference": a0 as a list}."""
-    return SkillEnv(cfg.character, cfg.task, cfg.env).clip_setup()
 
 
 class SkillEnv(EnvCore):
@@ -528,7 +521,8 @@ class SkillEnv(EnvCore):
         return out
 
     def clip_setup(self) -> dict:
-        """{"trace_shape": (bins, D), "reference": a0 as a list}: see `clip_setup`."""
+        """What the [L21] curriculum needs of the clip without building an env (the sampler
+        actor's): {"trace_shape": (bins, D), "reference": a0 as a list}."""
         return {"trace_shape": self.trace_shape, "reference": self.reference_task().tolist()}
 
     def jump_height(self) -> float:

@@ -12,11 +12,11 @@ from pathlib import Path
 import ray
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs.skill_env import clip_setup
+from paramimic.training.method import method_for
+from paramimic.training.trainer import Trainer
 from services.actors.rollout_actor import spawner
 from services.keys import sampler_actor_name
 from services.learner.ray_backend import RayBackend, SamplerClient
-from services.learner.trainer import Trainer
 from services.sampler.actor import start_sampler
 
 
@@ -35,10 +35,12 @@ def ray_stack(
     """Start the sampler and the rollout actors (`actor_class`: a Ray actor class with the
     RolloutActor interface, default RolloutActor; the fault tests inject through it); kill
     them on exit."""
-    clip = None if cfg.env.clip is None else clip_setup(cfg)
+    method = method_for(cfg)
+    clip = method.spaces.clip_setup()  # what an [L21] curriculum needs of the clip
     sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id, clip)
     try:
-        trainer = Trainer(cfg, run_dir, SamplerClient(sampler, cfg.actors.sampler_timeout))
+        client = SamplerClient(sampler, cfg.actors.sampler_timeout)
+        trainer = Trainer(cfg, run_dir, client, method)
         spawn = spawner(
             cfg, trainer.obs_dim, trainer.act_dim, sampler_actor_name(run_id), actor_class
         )

@@ -22,9 +22,9 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from paramimic.config import ExperimentConfig, resume_conflicts
+from paramimic.training import checkpoint
+from paramimic.training.trainer import SerialBackend, Trainer, TrainingDiverged
 from services.launch import reaper
-from services.learner import checkpoint
-from services.learner.trainer import SerialBackend, Trainer, TrainingDiverged
 
 RUN_ID_FILE = "run_id"
 

@@ -5,7 +5,7 @@ way. A controller file is a checkpoint cut down to what `paramimic play`, `rende
 read — the run's config, the policy (with its observation normalization), the marginal value
 V̄ and, for an [L21] skill, its curriculum (P_θ and the elites that deal m_a) — without the
 optimizer, the sampler's buffers or the learner's history. It is plain data, read with
-`torch.load(weights_only=True)` like every checkpoint (`services/learner/checkpoint.py`), so a
+`torch.load(weights_only=True)` like every checkpoint (`paramimic/training/checkpoint.py`), so a
 planted file cannot run code. Shipped files live in `paramimic/data/controllers/NAME.pt` and
 install with the package; `paramimic controllers add RUN --name NAME` writes one.
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import torch
 
-from services.learner import checkpoint
+from paramimic.training import checkpoint
 
 KEEP = ("config", "obs_dim", "act_dim", "marginal", "progress")
 SUFFIX = ".pt"

@@ -24,9 +24,8 @@ import ray
 from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayTaskError
 
 from paramimic.config import ExperimentConfig
-from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
-from paramimic.rl.numpy_mlp import Layers
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
+from paramimic.training.trainer import StopRequested
 from services.keys import SamplerUnavailable
 from services.learner.actor_pool import (
     READY_TIMEOUT,
@@ -35,7 +34,6 @@ from services.learner.actor_pool import (
     Spawn,
     resolve_num_actors,
 )
-from services.learner.trainer import StopRequested
 
 RETRY_PAUSE = 0.2  # seconds before asking a failed actor again
 
@@ -63,13 +61,23 @@ class SamplerFailed(RuntimeError):
 
 
 class SamplerClient:
-    """The learner's view of the sampler actor: the calls of a local curriculum, each answered
-    within `timeout` s (Ray restarts a dead sampler and retries the call meanwhile) or
-    `SamplerFailed`."""
+    """The learner's view of the sampler actor: every call of the curriculum (`Curriculum` and
+    its capability Protocols in `paramimic.training.curriculum`) forwarded to the actor and
+    answered within `timeout` s (Ray restarts a dead sampler and retries the call meanwhile),
+    or `SamplerFailed`."""
+
+    SOURCED = frozenset({"next_tasks", "next_deal"})  # the sampler logs who asked for tasks
 
     def __init__(self, handle: ray.actor.ActorHandle, timeout: float = 60.0) -> None:
         self.handle = handle
         self.timeout = timeout
+
+    def __getattr__(self, name: str):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        getattr(self.handle, name)  # AttributeError for what the sampler does not answer
+        source = ("learner",) if name in self.SOURCED else ()
+        return lambda *args: self._get(name, *args, *source)
 
     def _get(self, name: str, *args):
         try:
@@ -79,42 +87,6 @@ class SamplerClient:
                 f"the sampler actor did not answer {name} within {self.timeout:.0f} s "
                 f"({type(e).__name__})"
             ) from None
-
-    def next_tasks(self, n: int) -> np.ndarray:
-        return self._get("next_tasks", n, "learner")
-
-    def next_deal(self, n: int) -> TaskDeal:
-        return self._get("next_deal", n, "learner")
-
-    def ingest(self, episodes: list[EpisodeReport]) -> int:
-        return self._get("ingest", episodes)
-
-    def elite_data(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._get("elite_data")
-
-    def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None:
-        self._get("update_motion", layers, version, loss, stage)
-
-    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
-        self._get("update_marginal", layers, mu, iteration, refill)
-
-    def set_k(self, k: float) -> None:
-        self._get("set_k", k)
-
-    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None:
-        return self._get("edge_tasks", n, seed)
-
-    def judge_edge(self, episodes: int, falls: int) -> float:
-        return self._get("judge_edge", episodes, falls)
-
-    def summary(self) -> CurriculumSummary:
-        return self._get("summary")
-
-    def to_state(self) -> dict:
-        return self._get("to_state")
-
-    def from_state(self, state: dict) -> None:
-        self._get("from_state", state)
 
 
 class RayBackend:

@@ -27,7 +27,7 @@ def start_sampler(
 ):
     """Create the run's named sampler actor on the learner's node (it goes when the learner
     goes; a worker node leaving must not take it) and wait until it has loaded its state.
-    `clip`: what an [L21] curriculum knows of the clip (`paramimic.envs.skill_env.clip_setup`)."""
+    `clip`: what an [L21] curriculum knows of the clip (`Spaces.clip_setup` of the run's method)."""
     here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
     handle = SamplerActor.options(
         name=sampler_actor_name(run_id), namespace=RAY_NAMESPACE, scheduling_strategy=here

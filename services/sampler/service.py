@@ -22,15 +22,14 @@ from collections.abc import Iterable
 import numpy as np
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum.skill import new_curriculum
 from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
+from paramimic.training.method import method_for
 from services.keys import SAMPLES_LIMIT, RunKeys
 from services.store import add_event, connect, dumps
 
 RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
 GRID_SIZE = 21  # points per display dimension of the V̄ and density snapshots
-TRACES = "traces"  # the state part kept in its own hash (one field per elite), not as JSON
 
 
 class SamplerService:
@@ -43,21 +42,22 @@ class SamplerService:
         retry_seconds: float = 120.0,
         clip: dict | None = None,
     ) -> None:
-        # `clip`: the [L21] clip's trace shape and a0 (`paramimic.envs.skill_env.clip_setup`)
-        self.curriculum = new_curriculum(ExperimentConfig.model_validate(config), clip)
+        # `clip`: the [L21] clip's trace shape and a0 (`Spaces.clip_setup` of the run's method)
+        cfg = ExperimentConfig.model_validate(config)
+        self.curriculum = method_for(cfg).new_curriculum(clip)
         self.parts = self.curriculum.STATE_PARTS
-        self.skill = TRACES in self.parts  # the [L21] curriculum
+        self.entry_parts = self.curriculum.ENTRY_PARTS  # each in a hash of its own
         self.keys = RunKeys(run_id)
         self.recent_ids: deque[str] = deque(maxlen=RECENT_IDS)
         self.rewrite_all = True
         self.redis = connect(redis_url, retry_seconds, on_connect=self._reconnected)
-        fields = [p for p in self.parts if p != TRACES]
+        fields = [p for p in self.parts if p not in self.entry_parts]
         stored = self.redis.hmget(self.keys.curriculum, fields)
         if all(v is not None for v in stored):  # a restart: continue where it was
             state = {p: json.loads(v) for p, v in zip(fields, stored, strict=True)}
-            if self.skill:
-                traces = self.redis.hgetall(self.keys.traces)
-                state[TRACES] = {k: json.loads(v) for k, v in traces.items()}
+            for part in self.entry_parts:
+                entries = self.redis.hgetall(self.keys.part(part))
+                state[part] = {k: json.loads(v) for k, v in entries.items()}
             self.curriculum.from_state(state)
             kind = "sampler_restarted" if restarted else "sampler_started"
             self._commit(self.parts, event=(kind, "sampler reloaded its state from Redis"))
@@ -79,15 +79,15 @@ class SamplerService:
             full = self.rewrite_all
             self.rewrite_all = False
             wanted = self.parts if full else tuple(parts)
-            state = self.curriculum.to_state([p for p in wanted if p != TRACES])
+            state = self.curriculum.to_state([p for p in wanted if p not in self.entry_parts])
             fields = {p: dumps(v) for p, v in state.items()}
             fields["summary"] = dumps(self.curriculum.summary().to_dict())
             fields["updated_at"] = f"{time.time():.3f}"
-            if "marginal" in wanted:
-                fields["grid"] = dumps(self.curriculum.marginal_grid(GRID_SIZE))
+            views = self.curriculum.views(wanted, GRID_SIZE)
+            fields |= {name: dumps(view) for name, view in views.items()}
             pipe = self.redis.pipeline(transaction=True)
-            if self.skill:
-                self._write_skill(pipe, fields, full)
+            for part in self.entry_parts:
+                self._write_entries(pipe, part, full)
             pipe.hset(self.keys.curriculum, mapping=fields)
             if full and self.recent_ids:
                 pipe.sadd(self.keys.seen, *self.recent_ids)
@@ -102,19 +102,18 @@ class SamplerService:
             # (`ops` and the event were applied already)
             ops, event = None, None
 
-    def _write_skill(self, pipe, fields: dict, full: bool) -> None:
-        """[L21] extras of a transaction: elite traces (all of them on a full rewrite, else
-        what changed), and a density snapshot when the elite set changed."""
-        added, removed = self.curriculum.drain_traces()
+    def _write_entries(self, pipe, part: str, full: bool) -> None:
+        """An entry-by-entry part (the [L21] elites' traces) in its own hash: all of it on a
+        full rewrite, else what changed since the last write."""
+        key = self.keys.part(part)
+        added, removed = self.curriculum.drain(part)
         if full:
-            pipe.delete(self.keys.traces)
-            added = self.curriculum.traces
+            pipe.delete(key)
+            added = self.curriculum.entries(part)
         elif removed:
-            pipe.hdel(self.keys.traces, *removed)
+            pipe.hdel(key, *removed)
         if added:
-            pipe.hset(self.keys.traces, mapping={k: dumps(v.tolist()) for k, v in added.items()})
-        if full or added or removed:
-            fields["density"] = dumps(self.curriculum.density_grid(GRID_SIZE))
+            pipe.hset(key, mapping={k: dumps(v) for k, v in added.items()})
 
     # --- the curriculum's calls ---------------------------------------------------------------
 
@@ -157,8 +156,7 @@ class SamplerService:
         new_ids = [e.episode_id for e in new]
         self.curriculum.ingest(new)
         self.recent_ids.extend(new_ids)
-        changed = self.skill and bool(self.curriculum.added or self.curriculum.removed)
-        parts = ("core", "elites") if changed else ("core",)
+        parts = ("core", *self.curriculum.pending_parts())
         self._commit(parts, lambda pipe: pipe.sadd(self.keys.seen, *new_ids))
         return len(new)
 

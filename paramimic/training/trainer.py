@@ -21,14 +21,10 @@ import numpy as np
 import torch
 
 from paramimic.config import ExperimentConfig
-from paramimic.curriculum.bootstrap import Bootstrap
 from paramimic.curriculum.marginal_value import MarginalValue
-from paramimic.curriculum.parameterization_net import ParameterizationNet
-from paramimic.curriculum.skill import new_curriculum
 from paramimic.envs import make_env
 from paramimic.evaluation import deterministic, run_episodes
-from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
-from paramimic.rl.numpy_mlp import Layers
+from paramimic.messages import EpisodeReport
 from paramimic.rl.ppo import PPOLearner, adopt_controller
 from paramimic.rl.rollout import (
     Fragment,
@@ -38,7 +34,9 @@ from paramimic.rl.rollout import (
     tasks_per_fragment,
 )
 from paramimic.task_space import TaskSpace
-from services.learner import checkpoint
+from paramimic.training import checkpoint
+from paramimic.training.curriculum import Curriculum, WideningCurriculum
+from paramimic.training.method import Method, method_for
 
 
 class StopRequested(Exception):
@@ -48,35 +46,6 @@ class StopRequested(Exception):
 
 class TrainingDiverged(RuntimeError):
     """Updates kept producing non-finite losses or gradients; the run stopped with a checkpoint."""
-
-
-class Curriculum(Protocol):
-    """What the learner and the rollouts ask of the curriculum (local or the sampler actor)."""
-
-    def next_tasks(self, n: int) -> np.ndarray: ...
-
-    def next_deal(self, n: int) -> TaskDeal: ...
-
-    def ingest(self, episodes: list[EpisodeReport]) -> int: ...
-
-    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None: ...
-
-    def set_k(self, k: float) -> None: ...
-
-    def edge_tasks(self, n: int, seed: int) -> np.ndarray | None: ...
-
-    def judge_edge(self, episodes: int, falls: int) -> float: ...
-
-    # [L21] curricula only (SkillCurriculum, or the sampler actor that owns one)
-    def elite_data(self) -> tuple[np.ndarray, np.ndarray]: ...
-
-    def update_motion(self, layers, version: int, loss: float | None, stage: str) -> None: ...
-
-    def summary(self) -> CurriculumSummary: ...
-
-    def to_state(self) -> dict: ...
-
-    def from_state(self, state: dict) -> None: ...
 
 
 class RolloutBackend(Protocol):
@@ -138,14 +107,18 @@ class Trainer:
     trainer runs its own curriculum and, with `--serial`, has the machine to itself."""
 
     def __init__(
-        self, cfg: ExperimentConfig, run_dir: Path, curriculum: Curriculum | None = None
+        self,
+        cfg: ExperimentConfig,
+        run_dir: Path,
+        curriculum: Curriculum | None = None,
+        method: Method | None = None,
     ) -> None:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
-        probe = make_env(cfg.character, cfg.task, cfg.env)
-        self.space: TaskSpace = probe.task_space
-        self.obs_dim = probe.observation_space.shape[0]
-        self.act_dim = probe.action_space.shape[0]
+        self.method = method or method_for(cfg)
+        spaces = self.method.spaces
+        self.space: TaskSpace = spaces.task_space
+        self.obs_dim, self.act_dim = spaces.obs_dim, spaces.act_dim
         # a serial trainer has the machine to itself; on Ray the actors use the cores
         threads = cfg.train.torch_threads
         if threads == "auto":
@@ -162,19 +135,10 @@ class Trainer:
             cc.marginal_batch,
             seed=seed + 2,
         )
-        self.skill = cfg.env.clip is not None
-        self.motion_net: ParameterizationNet | None = None
-        self.bootstrap: Bootstrap | None = None
-        if self.skill:  # [L21]: P_θ and the bootstrap stages
-            sc = cc.skill
-            self.motion_net = ParameterizationNet(
-                self.space, probe.trace_shape, sc.p_hidden, sc.p_lr, sc.p_batch, seed=seed + 4
-            )
-            self.bootstrap = Bootstrap(sc)
+        self.parts = self.method.learner_parts(seed)  # [L21]: P_θ and the bootstrap stages
         if cfg.train.init_from is not None:
             self.warm_start(checkpoint.load(cfg.train.init_from))
-        self.clip = probe.clip_setup() if self.skill else None  # what the curriculum needs
-        self.curriculum = curriculum or new_curriculum(cfg, self.clip)
+        self.curriculum = curriculum or self.method.new_curriculum()
         self.progress = Progress()
         self._consistent = True  # False while an update is changing the state
         self.bad_updates = 0  # updates in a row with skipped non-finite steps
@@ -187,8 +151,7 @@ class Trainer:
             "learner": self.learner.state_dict(),
             "marginal": self.marginal.to_state(),
             "curriculum": self.curriculum.to_state(),
-            "motion_net": None if self.motion_net is None else self.motion_net.to_state(),
-            "bootstrap": None if self.bootstrap is None else self.bootstrap.to_state(),
+            **{name: part.to_state() for name, part in self.parts.items()},
             "progress": vars(self.progress).copy(),
             "obs_dim": self.obs_dim,
             "act_dim": self.act_dim,
@@ -198,9 +161,8 @@ class Trainer:
         self.learner.load_state_dict(state["learner"])
         self.marginal.from_state(state["marginal"])
         self.curriculum.from_state(state["curriculum"])
-        if self.motion_net is not None:
-            self.motion_net.from_state(state["motion_net"])
-            self.bootstrap.from_state(state["bootstrap"])
+        for name, part in self.parts.items():
+            part.from_state(state[name])
         self.progress = Progress(**state["progress"])
 
     def warm_start(self, state: dict) -> None:
@@ -282,8 +244,7 @@ class Trainer:
         self.progress.env_steps += steps
         self.progress.episodes += len(episodes)
         metrics.update(episode_metrics(episodes))
-        if self.skill:
-            metrics.update(self.update_motion(metrics.get("mean_return")))
+        metrics.update(self.method.after_update(self, metrics))
         if cfg.curriculum.widen is not None:  # how much of the task range is in use
             metrics.update(self.check_edge())
             metrics["range_width"] = self.curriculum.summary().range_width
@@ -300,7 +261,8 @@ class Trainer:
         if rule.promote_on != "edge" or it % rule.check_every:
             return {}
         seed = cfg.train.seed * 7919 + it
-        tasks = self.curriculum.edge_tasks(rule.window, seed)
+        curriculum: WideningCurriculum = self.curriculum
+        tasks = curriculum.edge_tasks(rule.window, seed)
         if tasks is None:  # the range is whole
             return {}
         env_cfg = cfg.env.for_evaluation(None)
@@ -312,29 +274,11 @@ class Trainer:
             seed,
         )
         falls = sum(r.fell for r in results)
-        self.curriculum.judge_edge(len(results), falls)
+        curriculum.judge_edge(len(results), falls)
         return {
             "edge_fall_percent": 100.0 * falls / len(results),
             "edge_env_steps": sum(r.length for r in results),
         }
-
-    def update_motion(self, mean_return: float | None) -> dict:
-        """[L21] §5.2-5.3: fit P_θ on the elites every `p_every` updates, advance the bootstrap
-        stage, and send both to the curriculum (which deals m_a with the tasks)."""
-        sc, it = self.cfg.curriculum.skill, self.progress.iteration
-        net, boot = self.motion_net, self.bootstrap
-        fitted = False
-        if it % sc.p_every == 0:
-            params, traces = self.curriculum.elite_data()
-            if len(params) >= 2:
-                net.fit(params, traces, sc.p_steps)
-                fitted = True
-        before = boot.stage
-        stage = boot.observe(it, mean_return, net.mse)
-        if fitted or stage != before:
-            layers = net.layers() if net.loss is not None else None
-            self.curriculum.update_motion(layers, net.version, net.mse, stage)
-        return {"stage": stage, "motion_version": net.version, "motion_loss": net.mse}
 
     def _metrics_log(self):
         """metrics.jsonl opened to append, without the rows of iterations this run's state never

@@ -1,0 +1,169 @@
+"""One object per training method: which env it trains in, its curriculum, what the learner
+keeps besides PPO and V̄, and what it adds to an iteration.
+
+- `WL19` — [WL19]: ParamEnv under the locomotion task (a procedural gait, or a looping clip as
+  the reference gait, `env.gait`), the adaptive curriculum on V̄ (Alg. 1).
+- `L21` — [L21]: SkillEnv on a clip (`env.clip`), the exploration/refinement curriculum with an
+  elite set, P_θ and the bootstrap stages (§5-6).
+
+A config's method is the first registered one that `applies` to it (`method_for`); a new
+method is one subclass and one `register` call (tests/test_method.py adds a toy one). Nothing
+outside these classes branches on which method a run is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, ClassVar
+
+import numpy as np
+
+from paramimic.config import EnvConfig, ExperimentConfig
+from paramimic.curriculum.adaptive import AdaptiveCurriculum
+from paramimic.curriculum.skill import SkillCurriculum
+from paramimic.envs import make_env
+from paramimic.task_space import TaskSpace
+from paramimic.training.curriculum import Curriculum, MotionCurriculum
+
+
+@dataclass(frozen=True)
+class Spaces:
+    """A method's spaces on its config, read once per process from one env."""
+
+    obs_dim: int
+    act_dim: int
+    task_space: TaskSpace
+    # [L21]: the motion trace's shape and a0, what the curriculum needs of the clip
+    trace_shape: tuple[int, int] | None = None
+    reference: np.ndarray | None = None
+
+    def clip_setup(self) -> dict | None:
+        """What the [L21] curriculum needs of the clip (sent to the sampler actor): None else."""
+        if self.trace_shape is None:
+            return None
+        return {"trace_shape": self.trace_shape, "reference": np.asarray(self.reference).tolist()}
+
+
+class Method:
+    """A training method on one experiment config."""
+
+    name: ClassVar[str]
+    # what `paramimic play` offers: "family" (bodies and goals change on the fly) or "skill"
+    # (set the task, then perform m_a from a reset)
+    play_kind: ClassVar[str] = "family"
+
+    def __init__(self, cfg: ExperimentConfig) -> None:
+        self.cfg = cfg
+
+    @classmethod
+    def applies(cls, cfg: ExperimentConfig) -> bool:
+        raise NotImplementedError
+
+    def make_env(self, env: EnvConfig | None = None):
+        """The method's env on this config (or on `env`, e.g. `cfg.env.for_evaluation()`)."""
+        cfg = self.cfg
+        return make_env(cfg.character, cfg.task, cfg.env if env is None else env)
+
+    @cached_property
+    def spaces(self) -> Spaces:
+        env = self.make_env()
+        return Spaces(env.observation_space.shape[0], env.action_space.shape[0], env.task_space)
+
+    def new_curriculum(self, clip: dict | None = None) -> Curriculum:
+        """The curriculum a run of this method keeps (in the sampler actor, or in-process).
+        `clip`: `Spaces.clip_setup()` when the caller must not build an env (the sampler)."""
+        raise NotImplementedError
+
+    def learner_parts(self, seed: int) -> dict[str, Any]:
+        """What the learner keeps besides PPO and V̄: name -> an object with `to_state` and
+        `from_state`, checkpointed under that name."""
+        return {}
+
+    def after_update(self, trainer, metrics: dict) -> dict:
+        """Work of this method after each PPO/V̄ update (`trainer`: the Trainer); returns
+        metrics to add to the iteration's."""
+        return {}
+
+
+class WL19(Method):
+    name = "wl19"
+
+    @classmethod
+    def applies(cls, cfg: ExperimentConfig) -> bool:
+        return cfg.env.clip is None
+
+    def new_curriculum(self, clip: dict | None = None) -> Curriculum:
+        return AdaptiveCurriculum.from_config(self.cfg)
+
+
+class L21(Method):
+    name = "l21"
+    play_kind = "skill"
+
+    @classmethod
+    def applies(cls, cfg: ExperimentConfig) -> bool:
+        return cfg.env.clip is not None
+
+    @cached_property
+    def spaces(self) -> Spaces:
+        env = self.make_env()
+        return Spaces(
+            env.observation_space.shape[0], env.action_space.shape[0], env.task_space,
+            env.trace_shape, env.reference_task(),
+        )  # fmt: skip
+
+    def new_curriculum(self, clip: dict | None = None) -> Curriculum:
+        clip = clip if clip is not None else self.spaces.clip_setup()
+        return SkillCurriculum.from_config(self.cfg, tuple(clip["trace_shape"]), clip["reference"])
+
+    def learner_parts(self, seed: int) -> dict[str, Any]:
+        """[L21] §5.2-5.3: the parameterization P_θ and the bootstrap stages."""
+        # here, not at the top: the sampler actor builds curricula and need not load torch
+        from paramimic.curriculum.bootstrap import Bootstrap
+        from paramimic.curriculum.parameterization_net import ParameterizationNet
+
+        sc, spaces = self.cfg.curriculum.skill, self.spaces
+        return {
+            "motion_net": ParameterizationNet(
+                spaces.task_space, spaces.trace_shape, sc.p_hidden, sc.p_lr, sc.p_batch,
+                seed=seed + 4,
+            ),
+            "bootstrap": Bootstrap(sc),
+        }  # fmt: skip
+
+    def after_update(self, trainer, metrics: dict) -> dict:
+        """Fit P_θ on the elites every `p_every` updates, advance the bootstrap stage, and send
+        both to the curriculum (which deals m_a with the tasks)."""
+        sc, it = self.cfg.curriculum.skill, trainer.progress.iteration
+        net, boot = trainer.parts["motion_net"], trainer.parts["bootstrap"]
+        curriculum: MotionCurriculum = trainer.curriculum
+        fitted = False
+        if it % sc.p_every == 0:
+            params, traces = curriculum.elite_data()
+            if len(params) >= 2:
+                net.fit(params, traces, sc.p_steps)
+                fitted = True
+        before = boot.stage
+        stage = boot.observe(it, metrics.get("mean_return"), net.mse)
+        if fitted or stage != before:
+            layers = net.layers() if net.loss is not None else None
+            curriculum.update_motion(layers, net.version, net.mse, stage)
+        return {"stage": stage, "motion_version": net.version, "motion_loss": net.mse}
+
+
+METHODS: list[type[Method]] = [L21, WL19]
+
+
+def register(method: type[Method]) -> type[Method]:
+    """Add a method (it is asked first whether it `applies`); usable as a class decorator."""
+    if method not in METHODS:
+        METHODS.insert(0, method)
+    return method
+
+
+def method_for(cfg: ExperimentConfig) -> Method:
+    for method in METHODS:
+        if method.applies(cfg):
+            return method(cfg)
+    raise ValueError(f"no training method applies to config {cfg.name!r}")
