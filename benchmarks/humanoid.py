@@ -58,6 +58,7 @@ from benchmarks.markdown import markdown_table  # noqa: E402
 DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
 SCREEN_MARK = ("<!-- screens -->", "<!-- /screens -->")
+SPEED_MARK = ("<!-- speed -->", "<!-- /speed -->")
 SCREENS = RESULTS / "humanoid_screens"
 SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 
@@ -325,7 +326,38 @@ def table() -> dict:
     (RESULTS / "humanoid.json").write_text(json.dumps(out, indent=2))
     _write_docs(rows)
     _write_section(SCREEN_MARK, _screens_table(out["screens"]))
+    _write_section(SPEED_MARK, _speed_table())
     return out
+
+
+def _speed_table() -> str:
+    """The humanoid's training speed against its targets, from benchmarks/throughput.py's JSON
+    (one run, side by side)."""
+    path = RESULTS / "throughput.json"
+    peer = (
+        json.loads(path.read_text())["peers"].get("configs/humanoid_walk.yaml")
+        if path.exists()
+        else None
+    )
+    if peer is None:
+        return "benchmarks/throughput.py has not measured humanoid_walk yet."
+    mode = peer["default_mode"]
+    ours, raw = peer[f"ours_{mode}"]["steps_per_s"], peer["raw_mj_step_600hz"]["steps_per_s"]
+    rllib = peer.get("rllib", {}).get("steps_per_s")
+
+    def verdict(ratio: float, target: float) -> str:
+        return f"target >= {target}x: " + ("met" if ratio >= target else "missed")
+
+    rows = [
+        ["raw `mj_step`, 600 Hz, one core", f"{raw:,.0f}", "", ""],
+        [f"paramimic, {mode} (the default), 2 actors", f"{ours:,.0f}", f"{ours / raw:.2f}x raw",
+         verdict(ours / raw, 1.35)],
+        ["paramimic, sync", f"{peer['ours_sync']['steps_per_s']:,.0f}", "", ""],
+    ]  # fmt: skip
+    if rllib is not None:
+        rows.append(["RLlib PPO, same env, network, batch and epochs", f"{rllib:,.0f}",
+                     f"ours {ours / rllib:.2f}x", verdict(ours / rllib, 1.5)])  # fmt: skip
+    return markdown_table(["arm", "env steps/s", "ratio", "target"], rows)
 
 
 def _screens_table(screens: list[dict]) -> str:
