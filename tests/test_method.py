@@ -19,7 +19,7 @@ TINY = {
 
 
 def test_each_shipped_kind_of_config_has_its_method():
-    walker = ExperimentConfig.model_validate({"task": {"leg_length": [0.9, 1.1]}})
+    walker = ExperimentConfig.model_validate({"task": {"left_leg_length": [0.9, 1.1]}})
     skill = ExperimentConfig.model_validate(
         {"task": {"gravity": [0.5, 1.5]}, "env": {"clip": "planar_jump"}}
     )
@@ -79,7 +79,7 @@ def toy():
 
 def test_a_new_method_is_one_class_and_one_registration(toy, tmp_path):
     cfg = ExperimentConfig.model_validate(
-        TINY | {"name": "toy_uniform", "task": {"leg_length": [0.8, 1.2]}}
+        TINY | {"name": "toy_uniform", "task": {"left_leg_length": [0.8, 1.2]}}
     )
     trainer = Trainer(cfg, tmp_path)
     assert isinstance(trainer.method, UniformBodies) and trainer.curriculum.mode == "uniform"
@@ -93,5 +93,5 @@ def test_a_new_method_is_one_class_and_one_registration(toy, tmp_path):
     again.load_state_dict(state)
     assert again.parts["counter"].updates == 2
     assert np.allclose(again.parts["counter"].returns, trainer.parts["counter"].returns)
-    other = ExperimentConfig.model_validate(TINY | {"task": {"leg_length": [0.8, 1.2]}})
+    other = ExperimentConfig.model_validate(TINY | {"task": {"left_leg_length": [0.8, 1.2]}})
     assert type(method_for(other)) is WL19  # the toy applies to its own configs only
