@@ -549,13 +549,6 @@ class TrainConfig(Section):
             raise ValueError("torch_threads must be >= 1 or 'auto'")
         return v
 
-    @field_validator("init_from")
-    @classmethod
-    def _existing_source(cls, v: Path | None) -> Path | None:
-        if v is not None and not v.exists():
-            raise ValueError(f"no checkpoint or run directory at {v}")
-        return v
-
 
 class ExperimentConfig(Section):
     name: str = Field(

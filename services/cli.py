@@ -105,9 +105,12 @@ def train(
         }.items()
         if v is not None
     }
+    from paramimic.training.preflight import PreflightError, preflight
+
     try:
         cfg = load_config(config, overrides)
-    except ConfigError as e:
+        preflight(cfg)  # once, before anything starts
+    except (ConfigError, PreflightError) as e:
         _fail(str(e))
     if not 0 <= api_port < 65536:
         _fail(f"--api-port must be in 0..65535, got {api_port}")

@@ -8,6 +8,7 @@ import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.envs import make_env
+from paramimic.training.preflight import PreflightError, preflight
 from paramimic.training.trainer import SerialBackend, Trainer
 
 
@@ -116,9 +117,29 @@ def test_an_edge_judged_family_tests_its_mean_action_at_the_edge_every_few_itera
     assert trainer.progress.env_steps == 4 * 256  # the tests' steps are not training samples
 
 
-def test_a_missing_source_fails_when_the_config_loads(tmp_path):
-    with pytest.raises(ValueError, match="init_from"):
-        _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))
+def test_a_missing_source_fails_in_the_preflight_not_when_a_saved_config_is_read(tmp_path):
+    cfg = _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))
+    with pytest.raises(PreflightError, match="train.init_from: no checkpoint or run directory"):
+        preflight(cfg)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PreflightError, match="train.init_from: no checkpoint at"):
+        preflight(_config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "empty")))
+
+
+def test_a_warm_started_run_evaluates_after_its_base_run_moved(tmp_path, base_run):
+    from paramimic.evaluation import evaluate_config
+    from paramimic.training import checkpoint
+
+    cfg = _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "base"))
+    preflight(cfg)
+    family = Trainer(cfg, tmp_path / "family")
+    family.save_checkpoint()
+    (tmp_path / "base").rename(tmp_path / "elsewhere")  # the base run moved (or another node)
+    state = checkpoint.load(tmp_path / "family")
+    again = ExperimentConfig.model_validate(state["config"])  # re-read as eval, play, actors do
+    assert again.train.init_from == tmp_path / "base"
+    report = evaluate_config(family.learner.policy, again, 2, 0, 1, seconds=0.5)
+    assert report["episodes"] == 2
 
 
 def test_evaluate_config_runs_the_configs_env_task_space_and_horizon(tmp_path):
