@@ -87,6 +87,19 @@ def wait_until(
         time.sleep(every)
 
 
+def holds(predicate, seconds: float, what: str = "a condition", every: float = 0.2) -> None:
+    """`predicate` stays true, polled every `every` s for `seconds` (an invariant over a
+    span: a paused run does not advance); fails at the first poll where it does not."""
+    import time
+
+    deadline = time.monotonic() + seconds
+    while True:
+        assert predicate(), f"{what} stopped holding"
+        if time.monotonic() > deadline:
+            return
+        time.sleep(every)
+
+
 @pytest.fixture(name="wait_until")
 def wait_until_fixture():
     """`wait_until(predicate, timeout, what)` as a fixture."""

@@ -9,12 +9,11 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 
 import httpx
 import pytest
 import yaml
-from conftest import API_TOKEN, wait_until
+from conftest import API_TOKEN, holds, wait_until
 
 TINY = {
     "name": "dash",
@@ -95,8 +94,7 @@ def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job, screens
                  "document.getElementById('pause').click();")  # fmt: skip
     wait_until(lambda: api.get(f"/runs/{job}/progress").json()["status"] == "paused", 120, "pause")
     held = api.get(f"/runs/{job}/progress").json()["iteration"]
-    time.sleep(3.0)
-    assert api.get(f"/runs/{job}/progress").json()["iteration"] == held
+    holds(lambda: api.get(f"/runs/{job}/progress").json()["iteration"] == held, 3.0, "pause")
     status = "return document.getElementById('run-status').innerText"
     wait_until(lambda: "paused" in _js(browser, status), 30, "the page to say paused")
     _js(browser, "document.getElementById('resume').click();")

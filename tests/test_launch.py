@@ -18,7 +18,7 @@ import psutil
 import pytest
 import redis
 import yaml
-from conftest import wait_until
+from conftest import holds, wait_until
 
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
@@ -64,8 +64,10 @@ class Launch:
         )
         self.lines: list[str] = []
         self.descendants: dict[psutil.Process, str] = {}  # process -> name when seen
-        threading.Thread(target=self._read, daemon=True).start()
-        threading.Thread(target=self._watch, daemon=True).start()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.watcher = threading.Thread(target=self._watch, daemon=True)
+        self.reader.start()
+        self.watcher.start()
 
     def _read(self) -> None:
         for line in self.proc.stdout:
@@ -94,8 +96,10 @@ class Launch:
         return wait_until(printed, timeout, "the API URL in the output", 0.1).group(1)
 
     def wait(self, timeout=300.0) -> int:
+        """The exit code, once the output is read to its end and the watcher has stopped."""
         code = self.proc.wait(timeout)
-        time.sleep(0.5)
+        self.reader.join(30)
+        self.watcher.join(30)
         return code
 
     def leftovers(self, timeout=30.0) -> list[str]:
@@ -205,8 +209,7 @@ def test_one_command_run_with_api_control_stopped_by_sigterm(tmp_path):
             lambda: c.get(f"/runs/{run}/progress").json()["status"] == "paused", 180, "paused"
         )
         held = c.get(f"/runs/{run}/progress").json()["iteration"]
-        time.sleep(2.0)
-        assert c.get(f"/runs/{run}/progress").json()["iteration"] == held
+        holds(lambda: c.get(f"/runs/{run}/progress").json()["iteration"] == held, 2.0, "pause")
         # k is applied while paused; resume goes on
         assert c.put(f"/runs/{run}/curriculum/k", json={"k": 0}, headers=auth).status_code == 202
         wait_until(

@@ -7,7 +7,6 @@ import json
 import os
 import signal
 import threading
-import time
 
 import httpx
 import numpy as np
@@ -19,6 +18,7 @@ from conftest import wait_until
 from paramimic.config import ExperimentConfig
 from paramimic.messages import EpisodeReport
 from services.keys import RunKeys
+from services.launch.processes import port_is_free
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
 from services.learner.reporter import RunReporter
@@ -168,7 +168,11 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(
         # 2) mid-fragment: actors are calling it; Ray retries their calls on the new sampler
         gate.open_.set()
         wait_until(lambda: len(metrics) >= n + 2, 120, "training to go on")
-        time.sleep(0.3)
+        served = ray.get(stack.sampler.summary.remote()).tasks_served
+        wait_until(
+            lambda: ray.get(stack.sampler.summary.remote()).tasks_served > served, 120,
+            "an actor to ask the sampler for tasks", 0.02,
+        )  # fmt: skip
         os.kill(ray.get(stack.sampler.pid.remote()), signal.SIGKILL)
         thread.join(timeout=600)
         assert not thread.is_alive() and not errors, errors
@@ -178,6 +182,12 @@ def test_kill_9_of_the_sampler_actor_loses_nothing(
         assert summary.episodes == stack.trainer.progress.episodes
         assert ray.get(stack.sampler.seen_count.remote()) == summary.episodes
     assert _events(redis_server.url, run_id).count("sampler_restarted") == 2
+
+
+def _in_aof(server: EmbeddedRedis, ids) -> bool:
+    """Whether the server's append-only files on disk hold every id."""
+    data = b"".join(p.read_bytes() for p in server.data_dir.rglob("*.aof"))
+    return all(i.encode() in data for i in ids)
 
 
 def test_a_redis_restart_during_a_run_loses_nothing_acknowledged(local_ray, run_id, tmp_path):
@@ -194,9 +204,10 @@ def test_a_redis_restart_during_a_run_loses_nothing_acknowledged(local_ray, run_
                 "episodes"
             ]
             client.close()
-            time.sleep(1.5)  # past the next `appendfsync everysec`
+            # the next `appendfsync everysec` has written every acknowledged id to the AOF
+            wait_until(lambda: _in_aof(server, acknowledged), 30, "the AOF to hold the ids")
             server.kill()  # SIGKILL: no shutdown fsync
-            time.sleep(1.0)
+            wait_until(lambda: port_is_free("127.0.0.1", server.port), 30, "the port")
             server.start()  # same port, same AOF
             thread.join(timeout=600)
             assert not thread.is_alive() and not errors, errors
