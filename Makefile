@@ -7,7 +7,7 @@ CONFIG ?= configs/walker_legs.yaml
 # every install takes its versions from constraints.txt (refresh it with `make lock`)
 PIP_C := -c constraints.txt
 
-.PHONY: train test lint bench clean gl rllib-venv lock
+.PHONY: train test test-deps lint bench clean gl rllib-venv lock
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -42,7 +42,20 @@ gl:
 	    apt-get update -qq && apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri; \
 	  else echo "warning: no Mesa EGL (apt install libegl1 libegl-mesa0 libgl1-mesa-dri)"; fi; }
 
-test: $(VENV)/.installed-test gl
+# what the tests drive besides Python: headless Chromium for the pages, Docker (with compose and
+# debootstrap for its base image) for the compose test; installed with apt when missing and we
+# are root, else those tests are skipped and say why.
+TEST_APT := chromium chromium-driver docker.io docker-compose debootstrap
+test-deps:
+	@for b in chromium chromedriver dockerd docker-compose debootstrap; do \
+	  command -v $$b >/dev/null || missing=1; done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	      --no-install-recommends $(TEST_APT); \
+	  else echo "warning: missing some of $(TEST_APT): the browser and compose tests skip"; fi; fi
+
+test: $(VENV)/.installed-test gl test-deps
 	$(BIN)/ruff check paramimic services tests benchmarks
 	$(BIN)/python -m pytest tests --durations=15
 

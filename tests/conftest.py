@@ -1,6 +1,4 @@
 import os
-import shutil
-import subprocess
 import warnings
 
 import pytest
@@ -175,17 +173,12 @@ def skill_run(redis_server, tmp_path_factory):
 CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 
 
-def _chromium_reachable() -> bool:
-    """Chromium and its driver are there, or this user can install them with apt."""
-    have = os.path.exists(CHROMIUM) and os.path.exists(DRIVER)
-    return have or (os.geteuid() == 0 and shutil.which("apt-get") is not None)
-
-
-# the browser tests run wherever Chromium is or can be installed (root and apt); elsewhere they
-# are skipped at collection with the reason, like the compose test
+# the browser tests run wherever Chromium and its driver are (`make test` installs them with
+# apt as root); elsewhere they are skipped at collection with the reason, like the compose test
 needs_browser = pytest.mark.skipif(
-    not _chromium_reachable(),
-    reason="headless Chromium needs Debian's chromium and chromium-driver (root and apt)",
+    not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)),
+    reason="headless Chromium needs Debian's chromium and chromium-driver (`make test` "
+    "installs them as root)",
 )
 
 
@@ -195,20 +188,8 @@ def pytest_collection_modifyitems(items):
             item.add_marker(needs_browser)
 
 
-def _install_chromium() -> None:
-    """apt-get install chromium and its driver if they are missing; a failure fails the test."""
-    if os.path.exists(CHROMIUM) and os.path.exists(DRIVER):
-        return
-    env = os.environ | {"DEBIAN_FRONTEND": "noninteractive"}
-    res = subprocess.run(["apt-get", "install", "-y", "--no-install-recommends", "chromium",
-                          "chromium-driver"], capture_output=True, text=True, env=env)  # fmt: skip
-    if res.returncode != 0:
-        pytest.fail(f"apt-get could not install chromium: {res.stderr[-300:]}")
-
-
 @pytest.fixture(scope="session")
 def browser():
-    _install_chromium()
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
