@@ -434,7 +434,7 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     from normalization import shrunk_shape_ranges
 
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
 
     config = variant_config(variant, seed)[0]
     state, env = _run_state(variant, seed)
@@ -445,7 +445,7 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
         cfg = load_config(ROOT / config, {"env": env} | ranges)
         policy = _adopted(state, cfg)
         env_cfg = cfg.env.for_evaluation(10.0)
-        space = make_env(cfg.character, cfg.task, env_cfg).task_space
+        space = env_for(cfg, env_cfg).task_space
         tasks = space.sample(np.random.default_rng(EVAL_SEED), episodes)
         summary = _on_bodies(policy, cfg, env_cfg, tasks)
         rows.append({"shape_scale": scale, "varying": prefix or "all"} | summary)
@@ -457,11 +457,11 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
 def _episodes_on(policy, cfg, env_cfg, tasks: np.ndarray) -> list:
     """The deterministic controller, one episode per task of `cfg`'s env, as `run`'s
     evaluation runs them (8 at a time, EVAL_SEED): EpisodeResults in the tasks' order."""
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import deterministic, run_episodes
 
     return run_episodes(
-        deterministic(policy), lambda: make_env(cfg.character, cfg.task, env_cfg), tasks, 8,
+        deterministic(policy), lambda: env_for(cfg, env_cfg), tasks, 8,
         EVAL_SEED,
     )  # fmt: skip
 
@@ -484,14 +484,14 @@ def rim(variant: str, seed: int) -> dict:
     study_rim_<variant>_s<seed>_<M>M.json."""
     warnings.filterwarnings("ignore")
     from paramimic.config import ExperimentConfig
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import summarize
 
     state, _ = _run_state(variant, seed)
     cfg = ExperimentConfig.model_validate(state["config"])
     width = float(state["curriculum"]["core"]["width"])
     env_cfg = cfg.env.for_evaluation(10.0)
-    space = make_env(cfg.character, cfg.task, env_cfg).task_space
+    space = env_for(cfg, env_cfg).task_space
     tasks = space.sample(np.random.default_rng(EVAL_SEED), EVAL_EPISODES)
     results = _episodes_on(_adopted(state, cfg), cfg, env_cfg, tasks)
     free = space.free
@@ -552,7 +552,7 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     from normalization import shrunk_shape_ranges
 
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.rl.ppo import CONSTANT
 
     config = variant_config(variant, seed)[0]
@@ -561,7 +561,7 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     cfg = load_config(ROOT / config, {"env": env} | shrunk_shape_ranges(Path(config).stem, 0.2))
     policy = _adopted(state, cfg)
     env_cfg = cfg.env.for_evaluation(10.0)
-    probe_env = make_env(cfg.character, cfg.task, env_cfg)
+    probe_env = env_for(cfg, env_cfg)
     names = list(probe_env.task_space.names)
     # the inputs that varied least in the run's training (its normalizer's std; inputs that never
     # varied, such as the fixed shape parameters, aside), and how far each body moves them at
@@ -779,7 +779,7 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
     study_headings_<variant>_s<seed>.json."""
     warnings.filterwarnings("ignore")
     from paramimic.config import ExperimentConfig
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import deterministic
     from paramimic.rl.networks import ActorCritic
     from paramimic.training import checkpoint
@@ -789,7 +789,7 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
     policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
     policy.load_state_dict(state["learner"]["policy"])
     act = deterministic(policy)
-    env = make_env(cfg.character, cfg.task, cfg.env.for_evaluation(10.0))
+    env = env_for(cfg, cfg.env.for_evaluation(10.0))
     rows = []
     for i in range(episodes):
         obs, _ = env.reset(seed=EVAL_SEED + i)
@@ -822,13 +822,13 @@ def fit_offsets(resets: int = 10) -> dict:
     from normalization import shrunk_shape_ranges
 
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
 
     rows = []
     for scale in (0.0, 0.05, 0.5):
         overrides = shrunk_shape_ranges("biped_lower", scale) | {"env.init_noise": 0.0}
         cfg = load_config(ROOT / "configs/biped_lower.yaml", overrides)
-        env = make_env(cfg.character, cfg.task, cfg.env).unwrapped
+        env = env_for(cfg).unwrapped
         offsets = []
         for i in range(resets):
             env.reset(seed=i)
@@ -851,14 +851,14 @@ def reference(resets: int = 10, steps: int = 10) -> dict:
     reference pose (zero action) for `steps` control steps from `resets` resets, the mean [WL19]
     pose bell (Eq. 5), with and without env.retarget. Writes study_reference_pose.json."""
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
 
     rows = []
     for left, right in REFERENCE_BODIES:
         row = {"left_leg_length": left, "right_leg_length": right}
         for retarget in (False, True):
             cfg = load_config(ROOT / CONFIG, {"env.retarget": retarget})
-            env = make_env(cfg.character, cfg.task, cfg.env)
+            env = env_for(cfg)
             task = {"left_leg_length": left, "right_leg_length": right, "target_velocity": 1.0}
             bells = []
             for seed in range(resets):

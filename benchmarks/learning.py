@@ -112,7 +112,7 @@ def _train_sb3(steps: int, run_dir: Path, seed: int) -> dict:
 
     import paramimic.envs  # noqa: F401
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import evaluate
 
     cfg = load_config(ROOT / "configs/walker_base.yaml", {"train.seed": seed})
@@ -162,10 +162,10 @@ def _train_sb3(steps: int, run_dir: Path, seed: int) -> dict:
         return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
 
     env_cfg = cfg.env.for_evaluation()
-    probe = make_env(cfg.character, cfg.task, env_cfg)
+    probe = env_for(cfg, env_cfg)
     report = evaluate(
         act,
-        lambda: make_env(cfg.character, cfg.task, env_cfg),
+        lambda: env_for(cfg, env_cfg),
         probe.task_space,
         EVAL_EPISODES,
         EVAL_SEED,

@@ -41,12 +41,12 @@ def main() -> None:
 
     mark("ray")
     from paramimic.config import load_config
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.rl.rollout import RolloutWorker  # noqa: F401
 
     mark("paramimic (rollout side, no torch)")
     cfg = load_config(ROOT / args.config)
-    envs = [make_env(cfg.character, cfg.task, cfg.env) for _ in range(cfg.actors.num_envs)]
+    envs = [env_for(cfg) for _ in range(cfg.actors.num_envs)]
     for i, env in enumerate(envs):
         env.reset(seed=i)
     mark(f"{cfg.actors.num_envs} envs")

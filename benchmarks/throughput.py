@@ -36,7 +36,7 @@ import numpy as np
 import ray
 
 from paramimic.config import ExperimentConfig, load_config
-from paramimic.envs import make_env
+from paramimic.envs import env_for
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
 
@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def raw_steps_per_s(cfg: ExperimentConfig, steps: int = 4000) -> float:
     """(a) one MjData, the env's PD targets held, mj_step(nstep=frame_skip) per control step."""
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     env.reset(seed=0)
     m, d = env.model, env.data
     ctrl = d.ctrl.copy()

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from paramimic.envs import ParamEnv
+from paramimic.envs import ParamEnv, env_for
 from paramimic.rl.networks import ActorCritic
 from paramimic.task_space import TaskSpace
 
@@ -192,13 +192,12 @@ def evaluate_config(
     """`evaluate` of the deterministic `policy` on an experiment config's env and task space
     (`cfg`: an ExperimentConfig), episodes of `seconds` (default: the config's horizon), the
     grid over the config's display dims."""
-    from paramimic.envs import make_env
 
     env_cfg = cfg.env.for_evaluation(seconds)
-    space = make_env(cfg.character, cfg.task, env_cfg).task_space
+    space = env_for(cfg, env_cfg).task_space
     return evaluate(
         deterministic(policy),
-        lambda: make_env(cfg.character, cfg.task, env_cfg),
+        lambda: env_for(cfg, env_cfg),
         space,
         episodes,
         seed,

@@ -221,7 +221,7 @@ def evaluate_cmd(
     ] = None,
 ) -> None:
     """Fall %, task achievement, returns and uniformity of a trained controller."""
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import deterministic, evaluate
     from paramimic.training import checkpoint
 
@@ -230,10 +230,10 @@ def evaluate_cmd(
     if heatmap is not None and heatmap.suffix.lower() != ".png":
         _fail(f"--heatmap must be a .png file, got {heatmap.name!r}")
     cfg, policy, state = _load_policy(run, seconds)
-    probe = make_env(cfg.character, cfg.task, cfg.env)
+    probe = env_for(cfg)
     report = evaluate(
         deterministic(policy),
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        lambda: env_for(cfg),
         probe.task_space,
         episodes,
         seed,
@@ -354,11 +354,11 @@ def render(
         _fail(f"--out must end in one of {VIDEO_SUFFIXES}, got {out.name!r}")
     if seconds <= 0 or width < 16 or height < 16:
         _fail("--seconds must be positive and --width/--height at least 16")
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.evaluation import deterministic
 
     cfg, policy, _ = _load_policy(run, max(seconds, 1.0))
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     space = env.task_space
     bodies = _parse_shapes(shapes, space.names)
     tasks = []
@@ -375,7 +375,7 @@ def render(
             _fail("--morph needs at least two shapes to move between")
         frames = render_morph(act, env, tasks[0], bodies, seconds, width, height, seed)
     else:
-        maker = lambda: make_env(cfg.character, cfg.task, cfg.env)  # noqa: E731
+        maker = lambda: env_for(cfg)  # noqa: E731
         frames = render_family(act, maker, tasks, seconds, width, height, seed)
     path = write_animation(frames, out, fps=1.0 / env.dt)
     console.print(f"wrote {path} ({len(frames)} frames, {frames[0].shape[1]}x{frames[0].shape[0]})")

@@ -35,9 +35,9 @@ def sidecar(cfg: ExperimentConfig, policy: ActorCritic, fmt: str) -> dict:
     """What a user of the exported file needs: the observation layout, the actions (joint
     targets in [-1, 1], one per joint, at the control rate) and the task space."""
     from paramimic.characters import registration
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
 
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     layout = env.observation_layout() if hasattr(env, "observation_layout") else None
     info = registration(cfg.character).info()
     return {

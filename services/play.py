@@ -35,13 +35,13 @@ class Session:
     def __init__(self, cfg: ExperimentConfig, policy, state: dict, width: int = 480,
                  height: int = 360) -> None:  # fmt: skip
         from paramimic.curriculum.marginal_value import MarginalValue
-        from paramimic.envs import make_env
+        from paramimic.envs import env_for
         from paramimic.render import Camera
         from paramimic.task_space import TaskSpace
         from paramimic.training.method import method_for
 
         self.cfg = cfg
-        self.env = make_env(cfg.character, cfg.task, cfg.env)
+        self.env = env_for(cfg)
         self.space: TaskSpace = self.env.task_space
         self.act = policy.numpy_policy()
         self.camera = Camera(width, height)

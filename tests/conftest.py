@@ -137,7 +137,7 @@ SKILL_CFG = {
 def skill_run(redis_server, tmp_path_factory):
     """An [L21] run: real SkillEnv episodes (tracking m0) ingested by the real sampler service."""
     from paramimic.config import ExperimentConfig
-    from paramimic.envs import make_env
+    from paramimic.envs import env_for
     from paramimic.rl.rollout import RolloutWorker
     from paramimic.training.method import method_for
     from services.learner.reporter import RunReporter
@@ -155,9 +155,9 @@ def skill_run(redis_server, tmp_path_factory):
         clip=method_for(cfg).spaces.clip_setup(),
     )
     sampler.update_motion(None, 0, None, "proxy")  # past π0: tasks uniform over the box
-    probe = make_env(cfg.character, cfg.task, cfg.env)
+    probe = env_for(cfg)
     worker = RolloutWorker(
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        lambda: env_for(cfg),
         4,
         probe.observation_space.shape[0],
         probe.action_space.shape[0],

@@ -13,7 +13,7 @@ import torch
 
 from paramimic.characters import REGISTRY
 from paramimic.config import ExperimentConfig
-from paramimic.envs import make_env
+from paramimic.envs import env_for, make_env
 from paramimic.training.trainer import SerialBackend, Trainer
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,7 +33,7 @@ def run(tmp_path_factory):
     backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
     trainer.train(backend, 2 * 512)
     backend.close()
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     rng = np.random.default_rng(0)
     obs = np.stack([env.reset(seed=i)[0] for i in range(50)])  # real observations, and noise
     obs = np.concatenate(

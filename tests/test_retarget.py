@@ -10,7 +10,7 @@ from paramimic.characters.articulated import BIPED_LOWER_GAIT, QUADRUPED_GAIT
 from paramimic.characters.legs import leg_chains
 from paramimic.characters.planar import WALKER_GAIT
 from paramimic.config import ExperimentConfig
-from paramimic.envs import make_env
+from paramimic.envs import env_for, make_env
 from paramimic.motion.retarget import (
     RetargetedGait,
     ankle_position,
@@ -97,14 +97,14 @@ def test_the_env_imitates_the_retargeted_gait_and_refuses_characters_without_leg
     cfg = ExperimentConfig.model_validate(
         {"character": "walker", "task": task, "env": {"retarget": True}}
     )
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     env.reset(seed=0)
     _, _, gait = _gait({"left_leg_length": 0.8, "right_leg_length": 1.2})
     for phi in (0.1, 0.55):
         np.testing.assert_allclose(env._reference_at(phi)[:6], gait.pose(phi), atol=2e-3)
     # the reward's pose bell under the reference's own PD targets (zero action), 10 resets x
     # 10 steps: the retargeted gait can be followed about as well as the base body's
-    plain = make_env(cfg.character, cfg.task, cfg.env.model_copy(update={"retarget": False}))
+    plain = env_for(cfg, cfg.env.model_copy(update={"retarget": False}))
 
     def pose_bell(e) -> float:
         bells = []
@@ -214,7 +214,7 @@ def test_a_3d_env_imitates_its_retargeted_gait():
         {"character": "biped_lower", "task": {k: (v, v) for k, v in shape.items()},
          "env": {"retarget": True}}
     )  # fmt: skip
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     env.reset(seed=0)
     joints = len(reference.pose(0.0))
     for phi in (0.1, 0.55):

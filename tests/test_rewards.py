@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs import ParamEnv, make_env
+from paramimic.envs import ParamEnv, env_for
 from paramimic.envs.rewards import (
     WL19Terms,
     l21_reward,
@@ -152,7 +152,7 @@ def test_param_env_pays_the_product_when_configured():
     cfg = ExperimentConfig.model_validate(
         {"character": "walker", "env": {"reward": {"combine": "product"}}}
     )
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     env.reset(seed=0)
     sigma = env.config.reward.sigma_end_effector
     for _ in range(3):

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs import make_env
+from paramimic.envs import env_for
 from paramimic.evaluation import deterministic, run_episodes
 from paramimic.training import checkpoint
 from paramimic.training.trainer import SerialBackend, Trainer
@@ -32,7 +32,7 @@ def _eval_return(trainer: Trainer, cfg: ExperimentConfig) -> float:
     tasks = np.tile(trainer.space.center, (8, 1))
     res = run_episodes(
         deterministic(trainer.learner.policy),
-        lambda: make_env(cfg.character, cfg.task, cfg.env),
+        lambda: env_for(cfg),
         tasks,
         num_envs=8,
         seed=123,

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs import make_env
+from paramimic.envs import env_for, make_env
 from paramimic.training.preflight import PreflightError, preflight
 from paramimic.training.trainer import SerialBackend, Trainer
 
@@ -147,7 +147,7 @@ def test_evaluate_config_runs_the_configs_env_task_space_and_horizon(tmp_path):
     from paramimic.rl.networks import ActorCritic
 
     cfg = _config(tmp_path, "eval", (0.7, 1.3))
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     policy = ActorCritic(env.observation_space.shape[0], env.action_space.shape[0], (16,), -1.0)
     report = evaluate_config(policy, cfg, 4, 0, 3, seconds=0.5)
     assert len(report["grid"]["returns"]) == 3 and report["grid"]["dims"] == [

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 import gymnasium as gym
 
 from paramimic import characters
-from paramimic.config import EnvConfig
+from paramimic.config import EnvConfig, ExperimentConfig
 from paramimic.envs.param_env import REWARD_TERMS, ParamEnv
 from paramimic.envs.skill_env import SkillEnv
 
@@ -23,6 +23,12 @@ def make_env(
     cfg = config if isinstance(config, EnvConfig) else EnvConfig.model_validate(config or {})
     env = SkillEnv if cfg.clip else ParamEnv
     return env(character=character, task=task, config=cfg)
+
+
+def env_for(experiment: ExperimentConfig, env: EnvConfig | None = None) -> ParamEnv | SkillEnv:
+    """An experiment's env: its character, task space and env section (or `env`, e.g.
+    `experiment.env.for_evaluation()`)."""
+    return make_env(experiment.character, experiment.task, experiment.env if env is None else env)
 
 
 def registered_envs() -> dict[str, dict]:
@@ -50,6 +56,7 @@ __all__ = [
     "REWARD_TERMS",
     "ParamEnv",
     "SkillEnv",
+    "env_for",
     "make_env",
     "register",
     "register_envs",

@@ -22,7 +22,7 @@ import numpy as np
 from paramimic.config import EnvConfig, ExperimentConfig
 from paramimic.curriculum.adaptive import AdaptiveCurriculum
 from paramimic.curriculum.skill import SkillCurriculum
-from paramimic.envs import make_env
+from paramimic.envs import env_for
 from paramimic.task_space import TaskSpace
 from paramimic.training.curriculum import Curriculum, MotionCurriculum
 
@@ -62,8 +62,7 @@ class Method:
 
     def make_env(self, env: EnvConfig | None = None):
         """The method's env on this config (or on `env`, e.g. `cfg.env.for_evaluation()`)."""
-        cfg = self.cfg
-        return make_env(cfg.character, cfg.task, cfg.env if env is None else env)
+        return env_for(self.cfg, env)
 
     @cached_property
     def spaces(self) -> Spaces:

@@ -22,7 +22,7 @@ import torch
 
 from paramimic.config import ExperimentConfig
 from paramimic.curriculum.marginal_value import MarginalValue
-from paramimic.envs import make_env
+from paramimic.envs import env_for
 from paramimic.evaluation import deterministic, run_episodes
 from paramimic.messages import EpisodeReport
 from paramimic.rl.ppo import PPOLearner, adopt_controller
@@ -72,7 +72,7 @@ class SerialBackend:
         self.n_tasks = tasks_per_fragment(m, self.steps)
         self.curriculum = curriculum
         self.worker = RolloutWorker(
-            lambda: make_env(cfg.character, cfg.task, cfg.env),
+            lambda: env_for(cfg),
             m,
             obs_dim,
             act_dim,
@@ -268,7 +268,7 @@ class Trainer:
         env_cfg = cfg.env.for_evaluation(None)
         results = run_episodes(
             deterministic(self.learner.policy),
-            lambda: make_env(cfg.character, cfg.task, env_cfg),
+            lambda: env_for(cfg, env_cfg),
             tasks,
             cfg.actors.num_envs,
             seed,
@@ -372,7 +372,7 @@ def _logged_steps(row: str) -> float:
 
 def reset_observations(cfg: ExperimentConfig, n: int = 64) -> np.ndarray:
     """Observations of `n` resets of the config's env (random tasks): [n, obs_dim]."""
-    env = make_env(cfg.character, cfg.task, cfg.env)
+    env = env_for(cfg)
     return np.stack([env.reset(seed=cfg.train.seed * 1000 + i)[0] for i in range(n)])
 
 

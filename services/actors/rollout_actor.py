@@ -19,7 +19,7 @@ import ray
 from ray.exceptions import GetTimeoutError, RayActorError
 
 from paramimic.config import ExperimentConfig
-from paramimic.envs import make_env
+from paramimic.envs import env_for
 from paramimic.messages import TaskDeal
 from paramimic.rl.rollout import Fragment, RolloutWorker, horizon_of
 from services.keys import RAY_NAMESPACE, SamplerUnavailable
@@ -46,7 +46,7 @@ class RolloutActor:
         if self.restarted:  # a restarted actor must not replay the episodes it already ran
             seed = int(np.random.SeedSequence([seed, os.getpid()]).generate_state(1)[0])
         self.worker = RolloutWorker(
-            lambda: make_env(cfg.character, cfg.task, cfg.env),
+            lambda: env_for(cfg),
             cfg.actors.num_envs,
             obs_dim,
             act_dim,
