@@ -13,6 +13,8 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from paramimic.task_space import TaskSpace
+
 PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegativeFloat = Annotated[float, Field(ge=0)]
 PositiveInt = Annotated[int, Field(gt=0)]
@@ -794,15 +796,16 @@ class ExperimentConfig(Section):
         return out
 
     def display_dims(self) -> tuple[str, ...]:
-        """Up to two task dimensions for grids: `curriculum.display_dims`, else the first free."""
-        return self.grid_dims() or tuple(n for n, (lo, hi) in self.task.items() if hi > lo)[:2]
-
-    def grid_dims(self) -> tuple[str, str] | None:
-        """The two task dimensions shown in grids and heatmaps."""
+        """The task dimensions the curriculum's maps, the evaluation's grid and the heatmaps
+        show: `curriculum.display_dims`, else the first two free ones (fewer if there are
+        fewer; a grid needs two)."""
         if self.curriculum.display_dims is not None:
-            return tuple(self.curriculum.display_dims)  # type: ignore[return-value]
-        free = [n for n, (lo, hi) in self.task.items() if hi > lo]
-        return (free[0], free[1]) if len(free) >= 2 else None
+            return tuple(self.curriculum.display_dims)
+        return tuple(n for n, (lo, hi) in self.task.items() if hi > lo)[:2]
+
+    def task_space(self) -> TaskSpace:
+        """The task space A (the envs' own, without building one)."""
+        return TaskSpace.from_ranges(self.task)
 
     def resolved_run_dir(self) -> Path:
         return self.train.run_dir or Path("runs") / self.name

@@ -194,13 +194,13 @@ def evaluate_config(
     grid over the config's display dims."""
 
     env_cfg = cfg.env.for_evaluation(seconds)
-    space = env_for(cfg, env_cfg).task_space
+    dims = cfg.display_dims()
     return evaluate(
         deterministic(policy),
         lambda: env_for(cfg, env_cfg),
-        space,
+        cfg.task_space(),
         episodes,
         seed,
-        cfg.grid_dims(),
+        dims if len(dims) == 2 else None,
         grid_size,
     )

@@ -230,14 +230,14 @@ def evaluate_cmd(
     if heatmap is not None and heatmap.suffix.lower() != ".png":
         _fail(f"--heatmap must be a .png file, got {heatmap.name!r}")
     cfg, policy, state = _load_policy(run, seconds)
-    probe = env_for(cfg)
+    dims = cfg.display_dims()
     report = evaluate(
         deterministic(policy),
         lambda: env_for(cfg),
-        probe.task_space,
+        cfg.task_space(),
         episodes,
         seed,
-        cfg.grid_dims(),
+        dims if len(dims) == 2 else None,
         grid,
         num_envs,
     )

@@ -16,7 +16,8 @@ from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
 STATE_PARTS = ("core", "buffer", "marginal")
-STAT_FIELDS = ("episodes", "steps", "falls", "diverged", "return_sum", "tasks_served", "batches")
+# `deals`: next_deal calls answered (an [L21] *batch* is a set of task parameters, `batch_count`)
+STAT_FIELDS = ("episodes", "steps", "falls", "diverged", "return_sum", "tasks_served", "deals")
 
 
 def marginal_function(layers: Layers, space: TaskSpace):
@@ -89,7 +90,7 @@ class AdaptiveCurriculum:
         """n task parameters drawn from S: [n, d]."""
         tasks = self.pull(self.sampler.next_tasks(n))
         self.stats["tasks_served"] += n
-        self.stats["batches"] += 1
+        self.stats["deals"] += 1
         return tasks
 
     def next_deal(self, n: int) -> TaskDeal:
@@ -258,7 +259,10 @@ class AdaptiveCurriculum:
         core = dict(state["core"])
         self.mu = core.pop("mu")
         self.marginal_iteration = int(core.pop("marginal_iteration"))
-        self.stats = dict.fromkeys(STAT_FIELDS, 0) | core.pop("stats")
+        stats = core.pop("stats")
+        if "batches" in stats:  # older states named the deals so
+            stats["deals"] = stats.pop("batches")
+        self.stats = dict.fromkeys(STAT_FIELDS, 0) | stats
         self.width = float(core.pop("width", 1.0 if self.config.widen is None else self.width))
         self.window = list(core.pop("window", [0, 0]))
         self.sampler.from_state(core | {"buffer": state["buffer"]})

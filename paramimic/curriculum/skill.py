@@ -138,7 +138,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         b["served"] += n
         tasks = np.asarray(b["params"])[idx]
         self.stats["tasks_served"] += n
-        self.stats["batches"] += 1
+        self.stats["deals"] += 1
         return TaskDeal(tasks, self.motions_for(tasks), b["id"], b["region"], self.motion_version)
 
     def _new_batch(self) -> None:
