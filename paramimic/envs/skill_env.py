@@ -57,6 +57,47 @@ class TaskMeasure:
     sigma: float  # σ_task of Eq. 8 in the parameter's unit
 
 
+@dataclass(frozen=True)
+class PoseTable:
+    """Kinematics of qpos rows on a body, as the skill env's tables and measures read them."""
+
+    ee: np.ndarray  # [n, E, 3] end-effector sites (world)
+    com: np.ndarray  # [n, 3] the COM
+    rot: np.ndarray  # [n, 3, 3] the root's orientation
+    low: np.ndarray  # [n, F] each foot's lowest contact point (height)
+    bodies: np.ndarray  # [n, B, 3] the bodies relative to the root, in its heading frame
+    energy: np.ndarray  # [n] kinetic energy (with `times`; else zeros)
+
+
+def pose_table(model, data, body: Body, qpos: np.ndarray, times: np.ndarray | None = None):
+    """The one kinematics loop of the skill env: every row of `qpos` [n, nq] set on `data`
+    (scratch data of `model`, the body `body`). With `times` [n] (s), also the kinetic energy,
+    from velocities by finite differences of neighbouring rows."""
+    n, root = len(qpos), body.root_body_id
+    feet = body.contact_site_ids.reshape(len(body.definition.feet), 4)
+    out = PoseTable(
+        np.empty((n, len(body.ee_site_ids), 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
+        np.empty((n, len(feet))), np.empty((n, model.nbody - root - 1, 3)), np.zeros(n),
+    )  # fmt: skip
+    for i, row in enumerate(qpos):
+        data.qpos[:] = row
+        if times is not None:
+            a, b = (i, i + 1) if i + 1 < n else (i - 1, i)
+            mujoco.mj_differentiatePos(model, data.qvel, times[b] - times[a], qpos[a], qpos[b])
+            mujoco.mj_forward(model, data)
+            mujoco.mj_energyVel(model, data)
+            out.energy[i] = data.energy[1]
+        else:
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_comPos(model, data)
+        out.ee[i] = data.site_xpos[body.ee_site_ids]
+        out.com[i] = data.subtree_com[root]
+        out.rot[i] = data.xmat[root].reshape(3, 3)
+        out.low[i] = data.site_xpos[feet, 2].min(axis=1)
+        out.bodies[i] = bodies_in_heading_frame(data.xpos, data.xmat, root)
+    return out
+
+
 class SkillEnv(EnvCore):
     @property
     def GOALS(self) -> frozenset[str]:  # noqa: N802 (EnvCore's name)
@@ -130,7 +171,8 @@ class SkillEnv(EnvCore):
         self._index_fall_geoms()
         dt = self.model.opt.timestep * self.frame_skip
         self._q0 = self._clip_qpos(c, np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt)
-        ee0, com0, low0, _ = self._kinematics(self._q0)
+        poses0 = self._kinematics(self._q0)
+        ee0, low0 = poses0.ee, poses0.low
         self._feet = np.array(
             [list(c.definition.end_effectors).index(f) for f in c.definition.feet]
         )
@@ -146,25 +188,8 @@ class SkillEnv(EnvCore):
                     "`unit: reference` (multiples of it) means nothing; give an SI unit"
                 )
 
-    def _kinematics(self, qpos: np.ndarray):
-        """World end-effectors [n, E, 3], COM [n, 3], each foot's lowest point [n, F] and the
-        bodies relative to the root in its heading frame [n, B, 3]."""
-        m, d, c = self.model, self._scratch, self.character
-        root = c.root_body_id
-        ee = np.empty((len(qpos), len(c.ee_site_ids), 3))
-        com = np.empty((len(qpos), 3))
-        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
-        low = np.empty((len(qpos), len(feet)))
-        bodies = np.empty((len(qpos), m.nbody - root - 1, 3))
-        for i, row in enumerate(qpos):
-            d.qpos[:] = row
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            ee[i] = d.site_xpos[c.ee_site_ids]
-            com[i] = d.subtree_com[root]
-            low[i] = d.site_xpos[feet, 2].min(axis=1)
-            bodies[i] = bodies_in_heading_frame(d.xpos, d.xmat, root)
-        return ee, com, low, bodies
+    def _kinematics(self, qpos: np.ndarray, times: np.ndarray | None = None) -> PoseTable:
+        return pose_table(self.model, self._scratch, self.character, qpos, times)
 
     def _clip_qpos(self, c: Body, times: np.ndarray) -> np.ndarray:
         """m0 at reference times (s) as qpos rows of body c: [n, nq]."""
@@ -176,36 +201,17 @@ class SkillEnv(EnvCore):
     def _reference_trajectory(self, length: float, dt: float) -> Trajectory:
         """m0 on this body as the measures read it, at φ = 0, 1, .. and the clip's end `length`;
         velocities (for the kinetic energy) by finite differences of the poses."""
-        m, d, c = self.model, self._scratch, self.character
+        c = self.character
         phis = np.arange(int(np.floor(length + 1e-9)) + 1, dtype=np.float64)
         if length - phis[-1] > 1e-6:
             phis = np.append(phis, length)
         # the clip's own last pose at its end (a looping clip would start its next cycle there)
         qpos = self._clip_qpos(c, np.minimum(phis * dt, self.clip.duration * (1 - 1e-9)))
-        n = len(qpos)
-        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
-        com, rot = np.empty((n, 3)), np.empty((n, 3, 3))
-        ee, low = np.empty((n, len(c.ee_site_ids), 3)), np.empty((n, len(feet)))
-        energy = np.zeros(n)
-        for i, row in enumerate(qpos):
-            d.qpos[:] = row
-            if self._energy:
-                a, b = (i, i + 1) if i + 1 < n else (i - 1, i)
-                mujoco.mj_differentiatePos(m, d.qvel, (phis[b] - phis[a]) * dt, qpos[a], qpos[b])
-                mujoco.mj_forward(m, d)
-                mujoco.mj_energyVel(m, d)
-                energy[i] = d.energy[1]
-            else:
-                mujoco.mj_kinematics(m, d)
-                mujoco.mj_comPos(m, d)
-            com[i] = d.subtree_com[c.root_body_id]
-            rot[i] = d.xmat[c.root_body_id].reshape(3, 3)
-            ee[i] = d.site_xpos[c.ee_site_ids]
-            low[i] = d.site_xpos[feet, 2].min(axis=1)
+        t = self._kinematics(qpos, phis * dt if self._energy else None)
         return Trajectory(
-            phis * dt, phis / length, com, rot,
-            {name: ee[:, j] for j, name in enumerate(c.definition.end_effectors)},
-            low, energy, float(mujoco.mj_getTotalmass(m)), low < CONTACT_HEIGHT,
+            phis * dt, phis / length, t.com, t.rot,
+            {name: t.ee[:, j] for j, name in enumerate(c.definition.end_effectors)},
+            t.low, t.energy, float(mujoco.mj_getTotalmass(self.model)), t.low < CONTACT_HEIGHT,
         )  # fmt: skip
 
     def _displaced(self, q0: np.ndarray, d_root: np.ndarray, d_joints: np.ndarray) -> np.ndarray:
@@ -246,11 +252,11 @@ class SkillEnv(EnvCore):
         )
         rn, nj = self.root_nv, self.nj
         qa = self._displaced(self._q0, rows[:, :rn], rows[:, rn : rn + nj])
-        ee, com, _, bodies = self._kinematics(qa)
+        poses = self._kinematics(qa)
         self._qa = qa
-        self._bodies_a = bodies
-        self._eea = ee - com[:, None, :]  # end-effectors relative to the COM
-        self._coma = com
+        self._bodies_a = poses.bodies
+        self._eea = poses.ee - poses.com[:, None, :]  # end-effectors relative to the COM
+        self._coma = poses.com
         self._tau_hat = np.clip(rows[:, -1], -TAU_LIMIT, TAU_LIMIT)
 
     def _at(self, table: np.ndarray, phi: float) -> np.ndarray:
