@@ -198,16 +198,20 @@ class SkillEnv(EnvCore):
             pose.root_position[:, 2] += c.hip_height - self._base_hip_height
         return self.definition.pose_qpos(c, pose)
 
-    def _reference_trajectory(self, length: float, dt: float) -> Trajectory:
+    def _reference_trajectory(
+        self, length: float, dt: float, energy: bool | None = None
+    ) -> Trajectory:
         """m0 on this body as the measures read it, at φ = 0, 1, .. and the clip's end `length`;
-        velocities (for the kinetic energy) by finite differences of the poses."""
+        with `energy` (default: when a task parameter measures it) the kinetic energy, from
+        velocities by finite differences of the poses."""
+        energy = self._energy if energy is None else energy
         c = self.character
         phis = np.arange(int(np.floor(length + 1e-9)) + 1, dtype=np.float64)
         if length - phis[-1] > 1e-6:
             phis = np.append(phis, length)
         # the clip's own last pose at its end (a looping clip would start its next cycle there)
         qpos = self._clip_qpos(c, np.minimum(phis * dt, self.clip.duration * (1 - 1e-9)))
-        t = self._kinematics(qpos, phis * dt if self._energy else None)
+        t = self._kinematics(qpos, phis * dt if energy else None)
         return Trajectory(
             phis * dt, phis / length, t.com, t.rot,
             {name: t.ee[:, j] for j, name in enumerate(c.definition.end_effectors)},
@@ -326,7 +330,8 @@ class SkillEnv(EnvCore):
         self._steps += 1
         self._phi = phi_next
         if self.diverging():
-            return self._end(self._last_obs, 0.0, 0.0, dphi, terminated=True, diverged=True)
+            info = self._info(dphi, 0.0, [0.0] * len(SKILL_TERMS), fell=False, diverged=True)
+            return self._end(self._last_obs, 0.0, info, terminated=True, completed=False)
         self._record(phi_next, d_joints, tau)
         self._measure_row(phi_next)
         s = self.skill
@@ -344,16 +349,8 @@ class SkillEnv(EnvCore):
         if self._held is not None or completed and self._hold_steps:  # standing after the end
             return self._hold(obs, reward + spike, spike, dphi, terms, fell, completed)
         if fell or completed or self._steps >= self._max_steps or self._timed_out():
-            return self._end(
-                obs,
-                reward + spike,
-                spike,
-                dphi,
-                terminated=fell or completed,
-                terms=terms,
-                fell=fell,
-                completed=completed,
-            )
+            info = self._info(dphi, spike, terms, fell=fell)
+            return self._end(obs, reward + spike, info, fell or completed, completed)
         info = self._info(dphi, spike, terms, fell=False)
         return obs, reward + spike, False, False, info
 
@@ -509,11 +506,7 @@ class SkillEnv(EnvCore):
         """Every measure of the library on m0 on the current body, in SI units (`clip info`)."""
         from paramimic.motion.measures import AXES, MEASURES
 
-        energy, self._energy = self._energy, True  # every measure, the kinetic energy too
-        try:
-            ref = self._reference_trajectory(self.length, self.dt)
-        finally:
-            self._energy = energy
+        ref = self._reference_trajectory(self.length, self.dt, energy=True)  # every measure
         out = {}
         for kind, k in MEASURES.items():
             variants: list[dict] = [{}]
@@ -536,25 +529,10 @@ class SkillEnv(EnvCore):
         com = np.asarray(self._path["com"])
         return float(com[:, 2].max() - com[0, 2])
 
-    def _end(
-        self,
-        obs,
-        reward,
-        spike,
-        dphi,
-        terminated,
-        terms=None,
-        fell=False,
-        completed=False,
-        diverged=False,
-    ):
-        terms = terms if terms is not None else [0.0] * len(SKILL_TERMS)
-        if len(terms) < len(SKILL_TERMS):
-            terms = terms + [0.0]
-        info = self._info(dphi, spike, terms, fell=fell, diverged=diverged)
-        info["skill"] = self._summary(completed and not diverged)
-        truncated = not terminated
-        return obs, reward, terminated, truncated, info
+    def _end(self, obs, reward: float, info: StepInfo, terminated: bool, completed: bool):
+        """The episode's last step: its outcome in `info`; not terminated is truncated."""
+        info["skill"] = self._summary(completed and not info["diverged"])
+        return obs, reward, terminated, not terminated, info
 
     def _info(self, dphi, spike, terms, fell, diverged=False) -> StepInfo:
         return StepInfo(
