@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 from paramimic.characters import Body
 from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
+from paramimic.envs.skill_record import EpisodePath
 from paramimic.messages import SkillOutcome, StepInfo
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
@@ -40,7 +41,6 @@ from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hing
 
 G = 9.81
 SKILL_TERMS = ("q", "ee", "com", "time", "task")
-PATH = ("time", "phase", "com", "rot", "ee", "low", "energy", "contact")  # Trajectory rows
 # jump_height without a declaration: the COM rise as a spike at the clip's end (Eq. 8)
 JUMP_HEIGHT = {"measure": "com_rise"}
 
@@ -306,7 +306,7 @@ class SkillEnv(EnvCore):
         self._x0 = float(d.qpos[0]) - float(self._at(self._qa, start)[0] - self._qa[0, 0])
         self._watch_stability()
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
-        self._path: dict[str, list] = {k: [] for k in PATH}
+        self._path = EpisodePath(m, c, self._energy, self._contact0)
         self._fired: set[str] = set()  # spikes paid this episode
         self._held: SkillOutcome | None = None  # the clip end's outcome while standing after it
         self._hold_left = 0
@@ -387,31 +387,11 @@ class SkillEnv(EnvCore):
 
     def _measure_row(self, phi: float) -> None:
         """One row of the episode's `Trajectory` (the state after this control step)."""
-        m, d, c, path = self.model, self.data, self.character, self._path
-        feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
-        path["time"].append(self._steps * self.dt)
-        path["phase"].append(phi / self.length)
-        path["com"].append(d.subtree_com[c.root_body_id].copy())
-        path["rot"].append(d.xmat[c.root_body_id].reshape(3, 3).copy())
-        path["ee"].append(d.site_xpos[c.ee_site_ids].copy())
-        path["low"].append(d.site_xpos[feet, 2].min(axis=1))
-        if self._energy:
-            mujoco.mj_energyVel(m, d)
-        path["energy"].append(float(d.energy[1]) if self._energy else 0.0)
-        k = min(int(round(phi)), len(self._contact0) - 1)
-        path["contact"].append(self._contact0[k])
+        self._path.add(self.data, self._steps * self.dt, phi / self.length, phi)
 
     def episode_trajectory(self) -> Trajectory:
         """The episode so far as the measures read it."""
-        p = self._path
-        ee = np.asarray(p["ee"])
-        return Trajectory(
-            np.asarray(p["time"]), np.asarray(p["phase"]), np.asarray(p["com"]),
-            np.asarray(p["rot"]),
-            {n: ee[:, j] for j, n in enumerate(self.character.definition.end_effectors)},
-            np.asarray(p["low"]), np.asarray(p["energy"]),
-            float(mujoco.mj_getTotalmass(self.model)), np.asarray(p["contact"]),
-        )  # fmt: skip
+        return self._path.trajectory()
 
     def measure(self, t: TaskMeasure, traj: Trajectory | None = None) -> float:
         """A measured task parameter on the episode so far (or `traj`), in its unit."""
@@ -424,8 +404,8 @@ class SkillEnv(EnvCore):
         if not self.measured or self._rsi:  # a mid-clip start measures no whole-motion task
             return None, None
         path = self._path
-        phase, prev = path["phase"][-1], path["phase"][-2]
-        air = [bool(np.all(low > CONTACT_HEIGHT)) for low in path["low"][-2:]]
+        phase, prev = path.phase[-1], path.phase[-2]
+        air = [bool(np.all(low > CONTACT_HEIGHT)) for low in path.low[-2:]]
         takeoff = air[1] and not air[0]
         cont, spikes = [], []
         for t in self.measured:
@@ -526,7 +506,7 @@ class SkillEnv(EnvCore):
 
     def jump_height(self) -> float:
         """Peak rise of the COM above its height at the start of this episode so far (m)."""
-        com = np.asarray(self._path["com"])
+        com = np.asarray(self._path.com)
         return float(com[:, 2].max() - com[0, 2])
 
     def _end(self, obs, reward: float, info: StepInfo, terminated: bool, completed: bool):
