@@ -135,7 +135,7 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
         for s, h in handlers.items():
             signal.signal(s, h)
         lock.close()
-        console.print(f"checkpoint: {run_dir / 'checkpoints' / checkpoint.LATEST}")
+        console.print(f"checkpoint: {checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST}")
 
 
 LOCK_FILE = ".lock"
@@ -191,123 +191,188 @@ def _train_serial(run: Run) -> int:
 
 
 def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: ExitStack) -> int:
-    import ray
+    return DistributedRun(run, opts, api_port, services).train()
 
-    from services.launch.api_process import ApiProcess
-    from services.launch.redis_server import EmbeddedRedis
-    from services.launch.stack import ray_stack
-    from services.learner.cluster import connect
+
+def _stops() -> dict[type[Exception], tuple[int, str, str]]:
+    """What ends a distributed run early: its exit code and what to say (Trainer.train writes
+    a checkpoint on the way out in every case)."""
     from services.learner.ray_backend import AllActorsLost, FragmentsFailing, SamplerFailed
-    from services.learner.reporter import RunOwned, RunReporter
 
-    cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
-    watchdog = reaper.start()  # ends what we start if we are killed; stopped last on the way out
-    services.callback(lambda: (watchdog.terminate(), watchdog.wait(10)))
-    redis_url = opts.redis_url
-    if redis_url is None:
-        server = EmbeddedRedis(run_dir / "redis")
-        redis_url = server.start()
-        services.callback(server.stop)
-        console.print(f"Redis: embedded, {masked(redis_url)}, AOF in {server.data_dir}")
-    if connect(opts.ray_address, opts.node_ip):
-        services.callback(ray.shutdown)
-    # ray.init puts sys.exit on SIGTERM in the driver: a `kill` or `docker stop` then left in
-    # the middle of an iteration and the process aborted on its way out; it stops as Ctrl-C does
-    signal.signal(signal.SIGTERM, stop)
-    run_id = run_id_for(run_dir, cfg, opts.resume)
-    reporter = RunReporter(redis_url, run_id)
-    try:
-        reporter.acquire()  # one learner per run id, also across machines sharing the Redis
-    except RunOwned as e:
-        raise LaunchError(str(e)) from e
-    services.callback(reporter.release)
-    stack = services.enter_context(ray_stack(cfg, run_dir, redis_url, run_id))
-    trainer, backend = stack.trainer, stack.backend
-    backend.should_stop = lambda: stop.set  # SIGTERM is honoured while it waits for actors
-    if state is not None:
-        trainer.load_state_dict(state)  # the sampler takes the checkpoint's curriculum too
-        _say_resumed(trainer, console)
-    console.print(
-        f"Ray: {backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
-        f"{backend.steps} steps per fragment, {cfg.actors.mode} mode"
-    )
-    api_url, api = None, None
-    if opts.api:
-        api = ApiProcess(redis_url, opts.api_host, api_port, opts.api_token, run_dir / "api.log")
-        api_url = api.start()
-        services.callback(api.stop)
-        console.print(f"API: {api_url}  (dashboard at /, docs at /docs; run id {run_id})")
-    reporter.start(cfg, run_dir, cfg.train.total_steps, api_url)
+    fix = "checkpoint saved, fix and --resume"
+    return {
+        AllActorsLost: (3, "stopped", "checkpoint saved, resume with --resume"),
+        TrainingDiverged: (4, "stopped", "checkpoint saved"),
+        FragmentsFailing: (5, "stopped (rollouts keep failing)", fix),
+        SamplerFailed: (5, "stopped (sampler failed)", fix),
+    }
 
-    def before_iteration() -> None:
+
+class DistributedRun:
+    """One run on Ray with Redis and the API, as steps: each `start_*` starts one thing and
+    registers its stop on `services` (an ExitStack, unwound in reverse on the way out); `train`
+    runs the loop and maps how it ended to an exit code."""
+
+    def __init__(self, run: Run, opts: LaunchOptions, api_port: int, services: ExitStack):
+        self.run, self.opts, self.api_port, self.services = run, opts, api_port, services
+        self.console, self.stop = run.console, run.stop
+        self.redis_url = opts.redis_url
+        self.api = None
+        self.api_url: str | None = None
+
+    def start_watchdog(self) -> None:
+        """Ends what we start if we are killed; stopped last on the way out."""
+        watchdog = reaper.start()
+        self.services.callback(lambda: (watchdog.terminate(), watchdog.wait(10)))
+
+    def start_redis(self) -> None:
+        """An embedded Redis with its data in the run directory, unless --redis-url names one."""
+        from services.launch.redis_server import EmbeddedRedis
+
+        if self.redis_url is not None:
+            return
+        server = EmbeddedRedis(self.run.run_dir / "redis")
+        self.redis_url = server.start()
+        self.services.callback(server.stop)
+        self.console.print(f"Redis: embedded, {masked(self.redis_url)}, AOF in {server.data_dir}")
+
+    def connect_ray(self) -> None:
+        import ray
+
+        from services.learner.cluster import connect
+
+        if connect(self.opts.ray_address, self.opts.node_ip):
+            self.services.callback(ray.shutdown)
+        # ray.init puts sys.exit on SIGTERM in the driver: a `kill` or `docker stop` then left
+        # in the middle of an iteration and the process aborted on its way out; it stops as
+        # Ctrl-C does
+        signal.signal(signal.SIGTERM, self.stop)
+
+    def own_run(self) -> None:
+        """The run's lease: one learner per run id, also across machines sharing the Redis."""
+        from services.learner.reporter import RunOwned, RunReporter
+
+        self.run_id = run_id_for(self.run.run_dir, self.run.cfg, self.opts.resume)
+        self.reporter = RunReporter(self.redis_url, self.run_id)
+        try:
+            self.reporter.acquire()
+        except RunOwned as e:
+            raise LaunchError(str(e)) from e
+        self.services.callback(self.reporter.release)
+
+    def start_stack(self) -> None:
+        """The sampler and the rollout actors, and the learner talking to them."""
+        from services.launch.stack import ray_stack
+
+        cfg, run_dir, state = self.run.cfg, self.run.run_dir, self.run.state
+        stack = self.services.enter_context(ray_stack(cfg, run_dir, self.redis_url, self.run_id))
+        self.trainer, self.backend = stack.trainer, stack.backend
+        self.backend.should_stop = lambda: self.stop.set  # SIGTERM honoured while it waits
+        if state is not None:
+            self.trainer.load_state_dict(state)  # the sampler takes the checkpoint's curriculum
+            _say_resumed(self.trainer, self.console)
+        self.console.print(
+            f"Ray: {self.backend.num_actors} rollout actors x {cfg.actors.num_envs} envs, "
+            f"{self.backend.steps} steps per fragment, {cfg.actors.mode} mode"
+        )
+
+    def start_api(self) -> None:
+        from services.launch.api_process import ApiProcess
+
+        opts = self.opts
+        if opts.api:
+            log = self.run.run_dir / "api.log"
+            self.api = ApiProcess(self.redis_url, opts.api_host, self.api_port, opts.api_token, log)
+            self.api_url = self.api.start()
+            self.services.callback(self.api.stop)
+            self.console.print(
+                f"API: {self.api_url}  (dashboard at /, docs at /docs; run id {self.run_id})"
+            )
+        self.reporter.start(self.run.cfg, self.run.run_dir, self.run.cfg.train.total_steps,
+                            self.api_url)  # fmt: skip
+
+    # --- what the loop calls ------------------------------------------------------------------
+
+    def before_iteration(self) -> None:
         """Apply the API's requests: k now; a pause holds here until resumed or stopped."""
+        reporter, stop = self.reporter, self.stop
         paused, k = reporter.take_control()
         announced = False
         while True:
             if k is not None:
-                trainer.curriculum.set_k(k)
+                self.trainer.curriculum.set_k(k)
             if not paused or stop.set:
                 break
             if not announced:
                 reporter.set_status("paused", "training paused")
-                console.print("[yellow]paused (POST /runs/{run}/resume to go on)[/]")
+                self.console.print("[yellow]paused (POST /runs/{run}/resume to go on)[/]")
                 announced = True
-            time.sleep(0.5)
+            time.sleep(0.5)  # the pause's poll of the control hash
             paused, k = reporter.take_control()
         if announced and not stop.set:
             reporter.set_status("running", "training resumed")
 
-    def on_checkpoint(path: Path | None, iteration: int, error: str | None = None) -> None:
+    def on_checkpoint(self, path: Path | None, iteration: int, error: str | None = None) -> None:
         if error is not None:
-            reporter.event("checkpoint_failed", error, {"iteration": iteration})
-            console.print(f"[yellow]{error}[/]")
+            self.reporter.event("checkpoint_failed", error, {"iteration": iteration})
+            self.console.print(f"[yellow]{error}[/]")
             return
-        reporter.event("checkpoint", f"checkpoint at iteration {iteration}", {"path": str(path)})
+        self.reporter.event(
+            "checkpoint", f"checkpoint at iteration {iteration}", {"path": str(path)}
+        )
 
-    status, code = "failed", 1
-    try:
-        with _progress_bar(console, cfg.train.total_steps, trainer.progress.env_steps) as show:
+    def on_metrics(self, m: dict) -> None:
+        self.reporter.progress(m)
+        for kind, message, data in self.backend.take_events():  # nodes lost and joined
+            self.reporter.event(kind, message, {**data, "iteration": m["iteration"]})
+            self.console.print(f"[yellow]{message}[/]")
+        self.keep_api_alive(m["iteration"])
 
-            def on_metrics(m: dict) -> None:
-                reporter.progress(m)
-                for kind, message, data in backend.take_events():  # nodes lost and joined
-                    reporter.event(kind, message, {**data, "iteration": m["iteration"]})
-                    console.print(f"[yellow]{message}[/]")
-                if api is not None and not api.alive():  # the API died: start it again
-                    api.start()
-                    message = f"the API process had exited; restarted on {api.url}"
-                    reporter.event("api_restarted", message, {"iteration": m["iteration"]})
-                    console.print(f"[yellow]{message}[/]")
-                show(m)
+    def keep_api_alive(self, iteration: int) -> None:
+        """The API died: start it again (on the same port)."""
+        if self.api is None or self.api.alive():
+            return
+        self.api.start()
+        message = f"the API process had exited; restarted on {self.api.url}"
+        self.reporter.event("api_restarted", message, {"iteration": iteration})
+        self.console.print(f"[yellow]{message}[/]")
 
-            trainer.train(
-                backend,
-                cfg.train.total_steps,
-                on_metrics=on_metrics,
-                should_stop=lambda: stop.set,
-                before_iteration=before_iteration,
-                on_checkpoint=on_checkpoint,
-            )
-        status, code = ("stopped" if stop.set else "finished"), 0
-    except AllActorsLost as e:  # the checkpoint was written by Trainer.train on the way out
-        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved, resume with --resume")
-        code = 3
-    except TrainingDiverged as e:
-        console.print(f"[bold red]stopped:[/] {e}; checkpoint saved")
-        code = 4
-    except (FragmentsFailing, SamplerFailed) as e:
-        what = "sampler failed" if isinstance(e, SamplerFailed) else "rollouts keep failing"
-        console.print(f"[bold red]stopped ({what}):[/] {e}; checkpoint saved, fix and --resume")
-        code = 5
-    finally:
-        if code == 1 and stop.set:  # interrupted by a second Ctrl-C
-            status = "stopped"
+    # --- the run --------------------------------------------------------------------------------
+
+    def train(self) -> int:
+        """Start everything, train; the exit code: 0 finished or stopped, else `_stops()`'."""
+        for step in (self.start_watchdog, self.start_redis, self.connect_ray, self.own_run,
+                     self.start_stack, self.start_api):  # fmt: skip
+            step()
+        cfg, trainer, stop, stops = self.run.cfg, self.trainer, self.stop, _stops()
+        total, done = cfg.train.total_steps, trainer.progress.env_steps
+        status, code = "failed", 1
         try:
-            reporter.set_status(status, f"training {status} at iteration "
-                                        f"{trainer.progress.iteration}")  # fmt: skip
+            with _progress_bar(self.console, total, done) as show:
+                trainer.train(
+                    self.backend,
+                    cfg.train.total_steps,
+                    on_metrics=lambda m: (self.on_metrics(m), show(m)),
+                    should_stop=lambda: stop.set,
+                    before_iteration=self.before_iteration,
+                    on_checkpoint=self.on_checkpoint,
+                )
+            status, code = ("stopped" if stop.set else "finished"), 0
+        except tuple(stops) as e:
+            code, what, then = stops[type(e)]
+            self.console.print(f"[bold red]{what}:[/] {e}; {then}")
+        finally:
+            if code == 1 and stop.set:  # interrupted by a second Ctrl-C
+                status = "stopped"
+            self.record_end(status)
+        return code
+
+    def record_end(self, status: str) -> None:
+        try:
+            self.reporter.set_status(status, f"training {status} at iteration "
+                                             f"{self.trainer.progress.iteration}")  # fmt: skip
         except Exception as e:  # Redis gone: the run's end is still in the checkpoint
-            console.print(f"[yellow]could not record the run's end in Redis: {e}[/]")
-    return code
+            self.console.print(f"[yellow]could not record the run's end in Redis: {e}[/]")
 
 
 def _say_resumed(trainer: Trainer, console: Console) -> None:
