@@ -37,6 +37,7 @@ import numpy as np
 
 from paramimic.characters import get_character
 from paramimic.envs import ParamEnv, SkillEnv
+from paramimic.envs.skill_motion import at
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
@@ -80,7 +81,7 @@ def _open_loop(name: str, hz: int, seconds: float = 10.0) -> dict:
     c, m, d = env.character, env.model, env.data
     steps = int(round(seconds * CONTROL_HZ))
     if isinstance(env, SkillEnv):
-        targets = [env._at(env._q0, min(k + 1.0, len(env._q0) - 1.0))[c.qpos_idx]
+        targets = [at(env._q0, min(k + 1.0, len(env._q0) - 1.0))[c.qpos_idx]
                    for k in range(steps)]  # fmt: skip
     else:
         phase, dphase = env._phase, env.dt / env.motion.period

@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 from paramimic.config import EnvConfig, SkillConfig
 from paramimic.envs import make_env
 from paramimic.envs.skill_env import SkillEnv
+from paramimic.envs.skill_motion import at
 from paramimic.messages import SkillOutcome
 
 TASK = {"gravity": (0.2, 1.65), "jump_height": (0.0, 0.6)}
@@ -55,7 +56,7 @@ def test_reference_time_advances_by_exp_tau_and_pd_target_is_displaced_m0(env):
     _, _, _, _, info = env.step(a)
     assert info["dphi"] == pytest.approx(2.0)
     assert env._phi == pytest.approx(phi_before + 2.0)
-    target = env._at(env._q0, env._phi)[c.qpos_idx]
+    target = at(env._q0, env._phi)[c.qpos_idx]
     target[0] += 0.2 * env.config.action_scale
     assert env.data.ctrl == pytest.approx(np.clip(target, c.ctrl_low, c.ctrl_high))
     _, _, _, _, info = env.step(np.zeros(env.nj + 1))
@@ -279,11 +280,11 @@ def test_rsi_starts_pi0_episodes_mid_clip_in_the_clips_pose_and_velocity():
         phi = env._phi
         assert 0 < phi < env.length - 1
         starts.add(round(phi, 6))
-        q = env._at(env._qa, phi)
+        q = at(env._qa, phi)
         c = env.character
         assert env.data.qpos[c.qpos_idx] == pytest.approx(q[c.qpos_idx])
         want = np.zeros(env.model.nv)
-        mujoco.mj_differentiatePos(env.model, want, env.dt, q, env._at(env._qa, phi + 1))
+        mujoco.mj_differentiatePos(env.model, want, env.dt, q, at(env._qa, phi + 1))
         assert env.data.qvel == pytest.approx(want)
         assert env.data.site_xpos[c.contact_site_ids, 2].min() >= 1e-3 - 1e-9  # not in the floor
     assert len(starts) == 3

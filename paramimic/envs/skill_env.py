@@ -28,16 +28,16 @@ from typing import Any
 import gymnasium as gym
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
 from paramimic.envs.rewards import l21_reward, l21_task, l21_tracking, l21_tracking_reward
+from paramimic.envs.skill_motion import DisplacedMotion, PoseTable, at
 from paramimic.envs.skill_record import EpisodePath
 from paramimic.messages import SkillOutcome, StepInfo
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
-from paramimic.motion.parameterization import TAU_LIMIT, displace, displace_hinges
+from paramimic.motion.parameterization import TAU_LIMIT
 
 G = 9.81
 SKILL_TERMS = ("q", "ee", "com", "time", "task")
@@ -55,47 +55,6 @@ class TaskMeasure:
     reward: str  # "spike" or "continuous"
     event: str  # when a spike is paid: clip_end, takeoff, window_end
     sigma: float  # σ_task of Eq. 8 in the parameter's unit
-
-
-@dataclass(frozen=True)
-class PoseTable:
-    """Kinematics of qpos rows on a body, as the skill env's tables and measures read them."""
-
-    ee: np.ndarray  # [n, E, 3] end-effector sites (world)
-    com: np.ndarray  # [n, 3] the COM
-    rot: np.ndarray  # [n, 3, 3] the root's orientation
-    low: np.ndarray  # [n, F] each foot's lowest contact point (height)
-    bodies: np.ndarray  # [n, B, 3] the bodies relative to the root, in its heading frame
-    energy: np.ndarray  # [n] kinetic energy (with `times`; else zeros)
-
-
-def pose_table(model, data, body: Body, qpos: np.ndarray, times: np.ndarray | None = None):
-    """The one kinematics loop of the skill env: every row of `qpos` [n, nq] set on `data`
-    (scratch data of `model`, the body `body`). With `times` [n] (s), also the kinetic energy,
-    from velocities by finite differences of neighbouring rows."""
-    n, root = len(qpos), body.root_body_id
-    feet = body.contact_site_ids.reshape(len(body.definition.feet), 4)
-    out = PoseTable(
-        np.empty((n, len(body.ee_site_ids), 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
-        np.empty((n, len(feet))), np.empty((n, model.nbody - root - 1, 3)), np.zeros(n),
-    )  # fmt: skip
-    for i, row in enumerate(qpos):
-        data.qpos[:] = row
-        if times is not None:
-            a, b = (i, i + 1) if i + 1 < n else (i - 1, i)
-            mujoco.mj_differentiatePos(model, data.qvel, times[b] - times[a], qpos[a], qpos[b])
-            mujoco.mj_forward(model, data)
-            mujoco.mj_energyVel(model, data)
-            out.energy[i] = data.energy[1]
-        else:
-            mujoco.mj_kinematics(model, data)
-            mujoco.mj_comPos(model, data)
-        out.ee[i] = data.site_xpos[body.ee_site_ids]
-        out.com[i] = data.subtree_com[root]
-        out.rot[i] = data.xmat[root].reshape(3, 3)
-        out.low[i] = data.site_xpos[feet, 2].min(axis=1)
-        out.bodies[i] = bodies_in_heading_frame(data.xpos, data.xmat, root)
-    return out
 
 
 class SkillEnv(EnvCore):
@@ -171,6 +130,7 @@ class SkillEnv(EnvCore):
         self._index_fall_geoms()
         dt = self.model.opt.timestep * self.frame_skip
         self._q0 = self._clip_qpos(c, np.arange(int(np.ceil(self.clip.duration / dt)) + 2) * dt)
+        self._motion = DisplacedMotion(self.model, self._scratch, c, self._q0, self.root_nq)
         poses0 = self._kinematics(self._q0)
         ee0, low0 = poses0.ee, poses0.low
         self._feet = np.array(
@@ -189,7 +149,7 @@ class SkillEnv(EnvCore):
                 )
 
     def _kinematics(self, qpos: np.ndarray, times: np.ndarray | None = None) -> PoseTable:
-        return pose_table(self.model, self._scratch, self.character, qpos, times)
+        return self._motion.kinematics(qpos, times)
 
     def _clip_qpos(self, c: Body, times: np.ndarray) -> np.ndarray:
         """m0 at reference times (s) as qpos rows of body c: [n, nq]."""
@@ -218,55 +178,13 @@ class SkillEnv(EnvCore):
             t.low, t.energy, float(mujoco.mj_getTotalmass(self.model)), t.low < CONTACT_HEIGHT,
         )  # fmt: skip
 
-    def _displaced(self, q0: np.ndarray, d_root: np.ndarray, d_joints: np.ndarray) -> np.ndarray:
-        """m0 ⊕ d (Eq. 2) on qpos rows: root position + d0, root rotation exp(d1), joints + d."""
-        q = q0.copy()
-        idx = self.character.qpos_idx
-        q[:, idx] = displace_hinges(q0[:, idx], d_joints)
-        if self.root_nq == self.root_nv:  # planar root: x, z and the pitch hinge add
-            q[:, : self.root_nq] = displace_hinges(q0[:, : self.root_nq], d_root)
-            return q
-        rotations = Rotation.from_quat(q0[:, 3:7], scalar_first=True)
-        q[:, :3], rotated = displace(q0[:, :3], rotations, d_root[:, :3], d_root[:, 3:])
-        q[:, 3:7] = rotated.as_quat(scalar_first=True)
-        return q
-
-    def _root_displacement(self, qpos: np.ndarray, q0: np.ndarray, x0: float) -> np.ndarray:
-        """The simulated root relative to m0's, the start x aligned: [root_nv]."""
-        d = np.empty(self.root_nv)
-        if self.root_nq == self.root_nv:
-            d[:] = qpos[: self.root_nq] - q0[: self.root_nq]
-            d[0] -= x0
-            return d
-        d[:3] = qpos[:3] - q0[:3]
-        d[0] -= x0
-        mujoco.mju_subQuat(d[3:], qpos[3:7], q0[3:7])
-        return d
-
     def _set_motion(self, trace: np.ndarray | None) -> None:
         """Tabulate m_a on the reference grid: pose, end-effectors relative to the COM, COM, τ̂."""
-        grid = np.arange(len(self._q0), dtype=np.float64)
         if trace is None:
             trace = np.zeros(self.trace_shape)
-        trace = np.asarray(trace, np.float64)
-        if trace.shape != self.trace_shape:
-            raise ValueError(f"motion trace must have shape {self.trace_shape}, got {trace.shape}")
-        rows = np.stack(
-            [np.interp(grid, self._bins, trace[:, j]) for j in range(self.trace_dim)], 1
-        )
-        rn, nj = self.root_nv, self.nj
-        qa = self._displaced(self._q0, rows[:, :rn], rows[:, rn : rn + nj])
-        poses = self._kinematics(qa)
-        self._qa = qa
-        self._bodies_a = poses.bodies
-        self._eea = poses.ee - poses.com[:, None, :]  # end-effectors relative to the COM
-        self._coma = poses.com
-        self._tau_hat = np.clip(rows[:, -1], -TAU_LIMIT, TAU_LIMIT)
-
-    def _at(self, table: np.ndarray, phi: float) -> np.ndarray:
-        x = min(max(phi, 0.0), len(table) - 1.000001)
-        k = int(x)
-        return table[k] + (x - k) * (table[k + 1] - table[k])
+        ma = self._motion.tables(np.asarray(trace, np.float64), self._bins)
+        self._qa, self._bodies_a, self._eea, self._coma = ma.q, ma.bodies, ma.ee, ma.com
+        self._tau_hat = ma.tau
 
     # --- episode ------------------------------------------------------------------------------
 
@@ -286,14 +204,14 @@ class SkillEnv(EnvCore):
         # RSI: a random phase of the clip (not its last control step), else the clip's start
         start = float(rng.random() * max(self.length - 1.0, 0.0)) if rsi else 0.0
         self._rsi = start > 0.0
-        d.qpos[:] = self._at(self._qa, start)
+        d.qpos[:] = at(self._qa, start)
         d.qpos[c.qpos_idx] += noise * rng.standard_normal(self.nj)
         height = 1 if self.root_nq == self.root_nv else 2
         mujoco.mj_kinematics(m, d)
         lowest = d.site_xpos[c.contact_site_ids, 2].min()
         if self._rsi:  # the clip's own state: its velocity, its height (lifted off the floor)
-            ahead = self._at(self._qa, start + 1.0)
-            mujoco.mj_differentiatePos(m, d.qvel, self.dt, self._at(self._qa, start), ahead)
+            ahead = at(self._qa, start + 1.0)
+            mujoco.mj_differentiatePos(m, d.qvel, self.dt, at(self._qa, start), ahead)
             d.qpos[height] -= min(lowest - 1e-3, 0.0)
         else:  # at rest, the lowest foot on the ground
             d.qvel[:] = 0.0
@@ -303,7 +221,7 @@ class SkillEnv(EnvCore):
         self._phi = start
         self._steps = 0
         # the root's x offset from m_a's (0 at the clip's start): the COM reference follows it
-        self._x0 = float(d.qpos[0]) - float(self._at(self._qa, start)[0] - self._qa[0, 0])
+        self._x0 = float(d.qpos[0]) - float(at(self._qa, start)[0] - self._qa[0, 0])
         self._watch_stability()
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._path = EpisodePath(m, c, self._energy, self._contact0)
@@ -325,7 +243,7 @@ class SkillEnv(EnvCore):
         dphi = float(np.exp(tau))
         phi_next = self._phi + dphi
         # PD target m0(φ') ⊕ d_t (§4.1); the servo clamps it to the joint's control range
-        d.ctrl[:] = self._at(self._q0, phi_next)[c.qpos_idx] + d_joints
+        d.ctrl[:] = at(self._q0, phi_next)[c.qpos_idx] + d_joints
         mujoco.mj_step(m, d, nstep=self.frame_skip)
         self._steps += 1
         self._phi = phi_next
@@ -381,7 +299,7 @@ class SkillEnv(EnvCore):
         heading frame: the measure ParamEnv's clip gaits report."""
         c, d = self.character, self.data
         sim = bodies_in_heading_frame(d.xpos, d.xmat, c.root_body_id)
-        return body_position_error(sim, self._at(self._bodies_a, self._phi))
+        return body_position_error(sim, at(self._bodies_a, self._phi))
 
     # --- task parameters as measures ---------------------------------------------------------
 
@@ -436,16 +354,16 @@ class SkillEnv(EnvCore):
     def _tracking(self, phi: float, tau: float) -> tuple[float, float, float, float]:
         """r_q, r_ee, r_com, r_time of Eq. 7 against m_a at φ."""
         c, d, s = self.character, self.data, self.skill
-        qa = self._at(self._qa, phi)
+        qa = at(self._qa, phi)
         dq = d.qpos[c.qpos_idx] - qa[c.qpos_idx]  # hinges: log(q̂⁻¹q) is the angle difference
         com = d.subtree_com[c.root_body_id]
         ee = d.site_xpos[c.ee_site_ids] - com
-        com_hat = self._at(self._coma, phi).copy()
+        com_hat = at(self._coma, phi).copy()
         com_hat[0] += self._x0
-        dt_hat = float(np.exp(self._at(self._tau_hat, phi)))
+        dt_hat = float(np.exp(at(self._tau_hat, phi)))
         return l21_tracking(
             dq,
-            ee - self._at(self._eea, phi),
+            ee - at(self._eea, phi),
             com - com_hat,
             float(np.exp(tau)) - dt_hat,
             s.sigma_q,
@@ -457,15 +375,15 @@ class SkillEnv(EnvCore):
     def _record(self, phi: float, d_joints: np.ndarray, tau: float) -> None:
         """Per-step samples for the trace and the fitness against m0 at φ."""
         c, d = self.character, self.data
-        q0 = self._at(self._q0, phi)
+        q0 = at(self._q0, phi)
         rec = self._rec
         rec["phi"].append(phi)
         rec["d"].append(
-            np.concatenate([self._root_displacement(d.qpos, q0, self._x0), d_joints, [tau]])
+            np.concatenate([self._motion.root_displacement(d.qpos, q0, self._x0), d_joints, [tau]])
         )
         q = d.qpos[c.qpos_idx]
         rec["pose"].append(q - q0[c.qpos_idx])
-        dq0 = (self._at(self._q0, phi + 0.5) - self._at(self._q0, phi - 0.5))[c.qpos_idx]
+        dq0 = (at(self._q0, phi + 0.5) - at(self._q0, phi - 0.5))[c.qpos_idx]
         rec["vel"].append(np.stack([(q - self._prev_q) / self.dt, dq0 / self.dt], axis=0))
         self._prev_q = q.copy()
         feet = c.contact_site_ids.reshape(len(c.definition.feet), 4)
@@ -573,8 +491,8 @@ class SkillEnv(EnvCore):
         xmat = d.xmat[root].reshape(3, 3)
         com = d.subtree_com[root]
         ee = (d.site_xpos[c.ee_site_ids] - d.xpos[root]) @ xmat  # root frame
-        nxt = phi + float(np.exp(self._at(self._tau_hat, phi)))
-        qa = self._at(self._qa, nxt)
+        nxt = phi + float(np.exp(at(self._tau_hat, phi)))
+        qa = at(self._qa, nxt)
         return np.concatenate(
             [
                 self.observed_task(),
@@ -585,7 +503,7 @@ class SkillEnv(EnvCore):
                 [com[2], d.xpos[root, 2], phi / self.length],
                 ee.ravel(),
                 qa[c.qpos_idx],  # the next frame of m_a: joint pose, root height, COM
-                [self._at(self._coma, nxt)[2], self._at(self._tau_hat, phi)],
+                [at(self._coma, nxt)[2], at(self._tau_hat, phi)],
             ],
             dtype=np.float32,
         )
