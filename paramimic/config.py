@@ -645,7 +645,7 @@ class ExperimentConfig(Section):
             )
         registration = _registry().registration(self.character)
         character = registration.character
-        if self.env.retarget and not getattr(character, "legs", ()):
+        if self.env.retarget and not character.legs:
             raise ValueError(
                 f"env.retarget: retargets a character's legs; {self.character!r} has none"
             )

@@ -65,6 +65,9 @@ class HumanoidDef:
     shape_params: tuple[ShapeParam, ...] = SHAPE_PARAMS
     planar: bool = False  # a free root
     swims: bool = False
+    # the leg chains the sagittal retargeting bends (`paramimic/motion/retarget.py`): none, its
+    # legs are ball-jointed hips and 1-DOF knees that the planar two-link map does not cover
+    legs: tuple[tuple[str, ...], ...] = ()
 
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.shape_params)

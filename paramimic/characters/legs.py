@@ -16,12 +16,12 @@ def leg_chains(
     their hinges about the pitch axis. Raises ValueError for a character without legs."""
     joints = [j.name for j in definition.joints]
     chains = []  # (thigh, shin, (hip, knee, ankle) hinges)
-    if getattr(definition, "planar", False):
+    if definition.planar:
         segments = {s.name: s for s in definition.segments}
         for thigh, shin in definition.legs:
             foot = next(s for s in definition.segments if s.parent == shin)
             chains.append((thigh, shin, (segments[thigh].joint, segments[shin].joint, foot.joint)))
-    elif getattr(definition, "legs", ()):
+    elif definition.legs:
         parts = {p.name: p for p in definition.parts}
 
         def pitch(part: str):

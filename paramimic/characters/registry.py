@@ -50,6 +50,9 @@ class Character(Protocol):
     @property
     def swims(self) -> bool: ...  # moves in MuJoCo's fluid model, no floor and no falls
 
+    @property
+    def legs(self) -> tuple[tuple[str, ...], ...]: ...  # hip-to-sole chains (retargeting); ()
+
     def param_names(self) -> tuple[str, ...]: ...
 
     def default_shape(self) -> dict[str, float]: ...
@@ -61,6 +64,7 @@ class Character(Protocol):
     def compile(self, shape: dict[str, float] | None = None) -> Body: ...
 
 
+@runtime_checkable
 class PosesClips(Protocol):
     """A character that can imitate clips maps a clip's poses to its qpos."""
 
@@ -165,7 +169,7 @@ def register(registration: Registration) -> Registration:
     gait = registration.gait
     if gait is not None and gait.joints != joints:
         raise ValueError(f"{c.name}: gait joints {gait.joints} != the character's {joints}")
-    if registration.clips and not hasattr(c, "pose_qpos"):
+    if registration.clips and not isinstance(c, PosesClips):
         raise TypeError(f"{c.name}: a character with clips needs pose_qpos (PosesClips)")
     _REGISTRY[c.name] = registration
     return registration
