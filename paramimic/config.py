@@ -282,6 +282,11 @@ class EnvConfig(Section):
         "task; None: the character's procedural gait",
     )  # fmt: skip
     skill: SkillConfig = SkillConfig()
+    clip_texts: dict[str, str] = Field(
+        default_factory=dict, description="the content of the clip files `clip` or `gait` "
+        "names (path -> text), carried with the run so that its actors, evaluation and play "
+        "need not see the file; `paramimic train` fills it",
+    )  # fmt: skip
 
     @model_validator(mode="after")
     def _rates(self) -> EnvConfig:
@@ -685,8 +690,8 @@ class ExperimentConfig(Section):
         clip = self.env.clip
         if clip is not None and clip not in registration.clips:
             if registration.clip_file is not None and clip not in _registry().clip_owners():
-                try:  # a user's clip file: read and checked now, before anything starts
-                    registration.load_clip(clip)
+                try:  # a user's clip file (or its carried text): checked now
+                    registration.load_clip(clip, self.env.clip_texts)
                 except (ValueError, KeyError) as e:
                     raise ValueError(f"env.clip: {e}") from None
                 # stored absolute: the run's saved config reads the same file from anywhere
@@ -705,7 +710,7 @@ class ExperimentConfig(Section):
                     "(env.gait, ParamEnv) or an [L21] skill (env.clip, SkillEnv), not both"
                 )
             try:
-                loaded = registration.load_clip(gait)
+                loaded = registration.load_clip(gait, self.env.clip_texts)
             except (ValueError, KeyError) as e:
                 raise ValueError(f"env.gait: {e}") from None
             if loaded.loop != "wrap":
@@ -881,4 +886,5 @@ def resume_conflicts(saved: dict, cfg: ExperimentConfig) -> list[str]:
         for key in sorted(old.keys() | new.keys())
         if old.get(key) != new.get(key)
         and any(key == f or key.startswith(f + ".") for f in RESUME_FIXED)
+        and not key.startswith("env.clip_texts.")  # the same file's text, carried or not
     ]

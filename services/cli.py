@@ -109,7 +109,7 @@ def train(
 
     try:
         cfg = load_config(config, overrides)
-        preflight(cfg)  # once, before anything starts
+        cfg = preflight(cfg)  # once, before anything starts: what the run carries
     except (ConfigError, PreflightError) as e:
         _fail(str(e))
     if not 0 <= api_port < 65536:

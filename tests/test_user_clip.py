@@ -159,3 +159,25 @@ def test_a_clip_path_is_stored_absolute_and_may_start_with_home(tmp_path, monkey
     assert cfg.env.clip == str(tmp_path.resolve() / "my_jump.txt")
     monkeypatch.chdir(tmp_path)
     assert load_config(_config(tmp_path, Path("my_jump.txt"))).env.clip == cfg.env.clip
+
+
+def test_the_clip_travels_with_the_run_not_its_path(tmp_path):
+    """`paramimic train`'s preflight carries the clip file's text in the run's config: the saved
+    config reads, builds its env and evaluates where the file is not (another machine, or the
+    file moved), and resuming with the file in place is no config change."""
+    from paramimic.config import ExperimentConfig, resume_conflicts
+    from paramimic.envs import env_for
+    from paramimic.training.preflight import preflight
+
+    clip = _user_clip(tmp_path)
+    cfg = load_config(_config(tmp_path, clip))
+    carried = preflight(cfg)
+    assert carried.env.clip_texts == {str(clip.resolve()): clip.read_text()}
+    saved = carried.model_dump(mode="json")
+    clip.rename(tmp_path / "moved.txt")  # the file is gone from where the config names it
+    again = ExperimentConfig.model_validate(saved)
+    env = env_for(again)
+    assert env.clip.duration == pytest.approx(env_for(carried).clip.duration)
+    env.reset(seed=0)
+    (tmp_path / "moved.txt").rename(clip)
+    assert resume_conflicts(saved, load_config(_config(tmp_path, clip))) == []

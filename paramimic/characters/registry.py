@@ -78,9 +78,9 @@ class Registration:
     character: Character
     gait: SinusoidalMotion | None = None  # [WL19] §5.3 reference gait (ParamEnv)
     clips: Mapping[str, Callable[[], Clip]] = field(default_factory=dict)  # [L21] (SkillEnv)
-    # reads a user's clip file for this character (e.g. DeepMimic's humanoid3d format); None:
-    # only the built-in clips
-    clip_file: Callable[[Path], Clip] | None = None
+    # reads a user's clip file for this character (e.g. DeepMimic's humanoid3d format), or
+    # parses its content (`text=`); None: only the built-in clips
+    clip_file: Callable[..., Clip] | None = None
     # extra gymnasium envs: id stem -> `make_env` kwargs ("task", "config"); every
     # character also gets `paramimic/<Name>-v0` and one env per clip
     envs: Mapping[str, Mapping] = field(default_factory=dict)
@@ -94,11 +94,14 @@ class Registration:
     def name(self) -> str:
         return self.character.name
 
-    def load_clip(self, clip: str) -> Clip:
-        """A built-in clip by name, or a clip file (a path) in the character's format; a file
-        that cannot be read or does not fit raises ValueError naming the problem."""
+    def load_clip(self, clip: str, texts: Mapping[str, str] | None = None) -> Clip:
+        """A built-in clip by name, or a clip file (a path) in the character's format, from
+        `texts` (path -> the file's content, carried with a run) when it is there; a file that
+        cannot be read or does not fit raises ValueError naming the problem."""
         if clip in self.clips:
             return self.clips[clip]()
+        if texts and clip in texts and self.clip_file is not None:
+            return self.clip_file(Path(clip), text=texts[clip])
         path = Path(clip).expanduser()
         if self.clip_file is None or not path.suffix and not path.exists():
             files = "" if self.clip_file is None else ", or a clip file"

@@ -60,7 +60,7 @@ class ParamEnv(EnvCore):
         if self.config.gait is not None:
             if self.definition.planar:
                 raise ValueError(f"env.gait: clip gaits need a free root; {self.definition.name!r}")
-            self._clip = self.registration.load_clip(self.config.gait)
+            self._clip = self.registration.load_clip(self.config.gait, self.config.clip_texts)
             gait = self._clip_gait(self._base)
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")

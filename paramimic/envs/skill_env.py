@@ -69,7 +69,8 @@ class SkillEnv(EnvCore):
         self._gravity_idx = self.goal_index("gravity")
         self.measured = self._task_measures()
         self._energy = any(t.measure.kind == "takeoff_kinetic_energy" for t in self.measured)
-        self.clip = self.registration.load_clip(self.config.clip)  # a name or a clip file
+        # a name, or a clip file (its text carried with the run when it is there)
+        self.clip = self.registration.load_clip(self.config.clip, self.config.clip_texts)
         base = self._base
         self.nj = len(base.qpos_idx)
         self.root_nq = base.model.nq - self.nj  # 3 (planar x, z, pitch) or 7 (free joint)

@@ -147,14 +147,16 @@ DEEPMIMIC_FRAME = 1 + 3 + 4 + sum(n for _, n in DEEPMIMIC_JOINTS)  # 44
 Y_UP_TO_Z_UP = Rotation.from_rotvec([np.pi / 2, 0.0, 0.0])
 
 
-def load_deepmimic(path: str | Path, name: str | None = None) -> Clip:
-    """A DeepMimic humanoid3d clip: {"Loop": "wrap"|"none", "Frames": [[44 numbers], ...]}.
+def load_deepmimic(path: str | Path, name: str | None = None, text: str | None = None) -> Clip:
+    """A DeepMimic humanoid3d clip: {"Loop": "wrap"|"none", "Frames": [[44 numbers], ...]},
+    read from `path`, or parsed from `text` (the file's content, carried with a run; `path`
+    then only names it).
 
     The root moves into our Z-up world; joint rotations stay local to their parents, so they
     apply unchanged to a skeleton built in the file's own frames."""
     path = Path(path)
     try:
-        raw = json.loads(path.read_text())
+        raw = json.loads(path.read_text() if text is None else text)
         frames = np.asarray(raw["Frames"], np.float64)
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{path}: not a DeepMimic clip: {e}") from e
