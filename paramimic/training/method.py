@@ -13,6 +13,7 @@ outside these classes branches on which method a run is.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, ClassVar
@@ -45,8 +46,9 @@ class Spaces:
         return {"trace_shape": self.trace_shape, "reference": np.asarray(self.reference).tolist()}
 
 
-class Method:
-    """A training method on one experiment config."""
+class Method(ABC):
+    """A training method on one experiment config (a subclass says when it applies and which
+    curriculum it keeps; the rest has defaults)."""
 
     name: ClassVar[str]
     # what `paramimic play` offers: "family" (bodies and goals change on the fly) or "skill"
@@ -57,8 +59,9 @@ class Method:
         self.cfg = cfg
 
     @classmethod
+    @abstractmethod
     def applies(cls, cfg: ExperimentConfig) -> bool:
-        raise NotImplementedError
+        """Whether this method trains `cfg`."""
 
     def make_env(self, env: EnvConfig | None = None):
         """The method's env on this config (or on `env`, e.g. `cfg.env.for_evaluation()`)."""
@@ -69,10 +72,10 @@ class Method:
         env = self.make_env()
         return Spaces(env.observation_space.shape[0], env.action_space.shape[0], env.task_space)
 
+    @abstractmethod
     def new_curriculum(self, clip: dict | None = None) -> Curriculum:
         """The curriculum a run of this method keeps (in the sampler actor, or in-process).
         `clip`: `Spaces.clip_setup()` when the caller must not build an env (the sampler)."""
-        raise NotImplementedError
 
     def learner_parts(self, seed: int) -> dict[str, Any]:
         """What the learner keeps besides PPO and V̄: name -> an object with `to_state` and
