@@ -288,21 +288,34 @@ class EnvConfig(Section):
         "need not see the file; `paramimic train` fills it",
     )  # fmt: skip
 
+    @model_validator(mode="before")
+    @classmethod
+    def _rates(cls, data: Any) -> Any:
+        """physics_hz and frame_skip, each from the other (configs before physics_hz give
+        frame_skip); both unset: the character's rate, filled in by the experiment."""
+        if not isinstance(data, dict):
+            return data
+        control = data.get("control_hz", cls.model_fields["control_hz"].default)
+        physics, skip = data.get("physics_hz"), data.get("frame_skip")
+        if not all(isinstance(v, int | None) for v in (physics, skip, control)) or control < 1:
+            return data  # the field's own type error names it
+        if physics is None and skip is not None:
+            return data | {"physics_hz": skip * control}
+        if physics is not None and skip is None and physics % control == 0:
+            return data | {"frame_skip": physics // control}
+        return data  # a rate that is not a multiple of control_hz fails below, naming both
+
     @model_validator(mode="after")
-    def _rates(self) -> EnvConfig:
-        if self.physics_hz is None and self.frame_skip is not None:  # configs before physics_hz
-            object.__setattr__(self, "physics_hz", self.frame_skip * self.control_hz)
+    def _consistent_rates(self) -> EnvConfig:
         if self.physics_hz is None:
-            return self  # the character's rate, set with the character
+            return self
+        steps = self.physics_hz // self.control_hz
         if self.physics_hz % self.control_hz:
             raise ValueError(
                 f"physics_hz ({self.physics_hz}) must be a multiple of control_hz "
                 f"({self.control_hz})"
             )
-        steps = self.physics_hz // self.control_hz
-        if self.frame_skip is None:
-            object.__setattr__(self, "frame_skip", steps)
-        elif self.frame_skip != steps:
+        if self.frame_skip != steps:
             raise ValueError(
                 f"frame_skip {self.frame_skip} != physics_hz / control_hz = {steps}; "
                 "set physics_hz and control_hz instead"
@@ -619,23 +632,39 @@ class ExperimentConfig(Section):
             raise ValueError(f"unknown character {v!r}; known: {sorted(known)}")
         return v
 
-    @model_validator(mode="after")
-    def _physics_rate(self) -> ExperimentConfig:
-        if self.env.physics_hz is None:
-            hz = _registry().registration(self.character).physics_hz
-            object.__setattr__(self, "env", self.env.with_rate(hz))
-        return self
+    @model_validator(mode="before")
+    @classmethod
+    def _character_defaults(cls, data: Any) -> Any:
+        """What the character fills in: its physics rate when `env` sets none, and with
+        `shape_space: full` every documented shape range (shrunk by `shape_scale`) that `task`
+        does not set. An unknown character is left to the field's own error."""
+        if (
+            not isinstance(data, dict)
+            or data.get("character", "walker") not in _registry().REGISTRY
+        ):
+            return data
+        registration = _registry().registration(data.get("character", "walker"))
+        data = dict(data)
+        env = data.get("env")
+        if isinstance(env, EnvConfig) and env.physics_hz is None:
+            data["env"] = env.with_rate(registration.physics_hz)
+        elif env is None or isinstance(env, dict) and env.get("physics_hz") is None:
+            env = dict(env or {})
+            if env.get("frame_skip") is None:
+                data["env"] = env | {"physics_hz": registration.physics_hz}
+        if data.get("shape_space") == "full" and isinstance(data.get("task", {}), dict):
+            params = registration.character.shape_params
+            if not params:
+                raise ValueError(f"shape_space: {registration.name!r} has no shape parameters")
+            s = data.get("shape_scale", 1.0)
+            if isinstance(s, int | float) and 0 <= s <= 1:
+                full = {p.name: (1 - s * (1 - p.low), 1 + s * (p.high - 1)) for p in params}
+                data["task"] = full | dict(data.get("task") or {})
+        return data
 
     @model_validator(mode="after")
-    def _expand_shape_space(self) -> ExperimentConfig:
-        if self.shape_space == "full":
-            params = _registry().get_character(self.character).shape_params
-            if not params:
-                raise ValueError(f"shape_space: {self.character!r} has no shape parameters")
-            s = self.shape_scale
-            full = {p.name: (1 - s * (1 - p.low), 1 + s * (p.high - 1)) for p in params}
-            object.__setattr__(self, "task", full | dict(self.task))
-        elif self.shape_scale != 1.0:
+    def _shape_scale_needs_full(self) -> ExperimentConfig:
+        if self.shape_space != "full" and self.shape_scale != 1.0:
             raise ValueError(
                 "shape_scale: shrinks the documented shape ranges of shape_space 'full'"
             )
@@ -643,11 +672,6 @@ class ExperimentConfig(Section):
 
     @model_validator(mode="after")
     def _valid_task(self) -> ExperimentConfig:
-        if self.curriculum.widen is not None and self.env.clip is not None:
-            raise ValueError(
-                "curriculum.widen: a widening range is for [WL19] families (env.clip unset); "
-                "[L21] skills grow their explored region by the exploration curriculum"
-            )
         registration = _registry().registration(self.character)
         character = registration.character
         if self.env.retarget and not character.legs:
@@ -658,11 +682,6 @@ class ExperimentConfig(Section):
             raise ValueError(
                 f"env.heading_error_limit: {self.character!r} is planar and cannot turn away "
                 "from its target; the rule is for 3D characters"
-            )
-        if self.env.retarget and self.env.clip is not None:
-            raise ValueError(
-                "env.retarget: retargets the character's [WL19] gait (env.clip unset); [L21] "
-                "skills adapt their clip by the motion displacement of P_θ"
             )
         measures = self.env.skill.measures
         self._valid_measures(character)
@@ -687,59 +706,19 @@ class ExperimentConfig(Section):
                         f"task.{name}: [{lo}, {hi}] leaves the range {self.character!r} "
                         f"supports, [{low}, {high}]"
                     )
-        clip = self.env.clip
-        if clip is not None and clip not in registration.clips:
-            if registration.clip_file is not None and clip not in _registry().clip_owners():
-                try:  # a user's clip file (or its carried text): checked now
-                    registration.load_clip(clip, self.env.clip_texts)
-                except (ValueError, KeyError) as e:
-                    raise ValueError(f"env.clip: {e}") from None
-                # stored absolute: the run's saved config reads the same file from anywhere
-                object.__setattr__(self.env, "clip", str(Path(clip).expanduser().resolve()))
-            else:
-                owners = _registry().clip_owners()
-                raise ValueError(
-                    f"env.clip {clip!r} does not fit character {self.character!r}; clips: "
-                    + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
-                )
-        gait = self.env.gait
-        if gait is not None:
-            if clip is not None:
-                raise ValueError(
-                    "env.gait and env.clip: a clip is either the [WL19] reference gait "
-                    "(env.gait, ParamEnv) or an [L21] skill (env.clip, SkillEnv), not both"
-                )
-            try:
-                loaded = registration.load_clip(gait, self.env.clip_texts)
-            except (ValueError, KeyError) as e:
-                raise ValueError(f"env.gait: {e}") from None
-            if loaded.loop != "wrap":
-                raise ValueError(
-                    f"env.gait: clip {gait!r} does not loop (Loop {loaded.loop!r}); a [WL19] "
-                    "reference gait must be cyclic; imitate it as a skill with env.clip"
-                )
-            if character.planar:
-                raise ValueError(
-                    f"env.gait: clip gaits need a free root; {self.character!r} is planar"
-                )
-            if gait not in registration.clips:
-                object.__setattr__(self.env, "gait", str(Path(gait).expanduser().resolve()))
-        if self.env.deviation_limit is not None and gait is None:
-            raise ValueError("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
-        if clip is None and gait is None and registration.gait is None:
+        if self.env.clip is not None and self.env.gait is not None:
             raise ValueError(
-                f"character {self.character!r} has no procedural [WL19] gait; set env.gait "
-                f"(a looping clip) or env.clip (one of {sorted(registration.clips)})"
+                "env.gait and env.clip: a clip is either the [WL19] reference gait "
+                "(env.gait, ParamEnv) or an [L21] skill (env.clip, SkillEnv), not both"
             )
+        for field in ("clip", "gait"):
+            _check_clip_name(field, getattr(self.env, field), registration)
+        if self.env.gait is not None and character.planar:
+            raise ValueError(f"env.gait: clip gaits need a free root; {self.character!r} is planar")
         if "target_direction" in self.task and character.planar:
             raise ValueError(
                 f"task.target_direction: {self.character!r} moves in the sagittal plane only"
             )
-        skill_only = ({"gravity", "jump_height"} | set(measures)) & set(self.task)
-        if clip is None and skill_only:
-            raise ValueError(f"task.{sorted(skill_only)[0]} needs env.clip (the skill env)")
-        if clip is not None and "target_velocity" in self.task:
-            raise ValueError("task.target_velocity is a [WL19] gait goal; the skill env has none")
         for name, value in self.curriculum.skill.reference.items():
             if name not in self.task:
                 raise ValueError(f"curriculum.skill.reference.{name}: not a task parameter")
@@ -818,6 +797,21 @@ class ExperimentConfig(Section):
 
 class ConfigError(ValueError):
     """A config that cannot run; the message names the field and the reason."""
+
+
+def _check_clip_name(field: str, name: str | None, registration) -> None:
+    """`env.clip` / `env.gait` names one of the character's clips or a clip file; which file,
+    and whether it parses, is the train preflight's to check (validation reads no files)."""
+    if name is None or name in registration.clips:
+        return
+    owners = _registry().clip_owners()
+    is_file = registration.clip_file is not None and (Path(name).suffix or "/" in name)
+    if name in owners or not is_file:
+        raise ValueError(
+            f"env.{field} {name!r} does not fit character {registration.name!r}; clips: "
+            + ", ".join(f"{k} ({'/'.join(v)})" for k, v in owners.items())
+            + (", or a clip file (a path)" if registration.clip_file is not None else "")
+        )
 
 
 def format_validation_error(err: ValidationError) -> str:

@@ -34,14 +34,7 @@ def _write(tmp_path, text):
         ("task: {target_direction: [0, 1]}", "(config)", "sagittal plane only"),
         ("shape_space: all", "shape_space", "Input should be 'task' or 'full'"),
         # [L21] skill configs
-        ("character: humanoid", "(config)", "no procedural [WL19] gait; set env.gait"),
         ("env: {clip: humanoid_jump}", "(config)", "does not fit character 'walker'"),
-        ("task: {gravity: [0.5, 1.5]}", "(config)", "task.gravity needs env.clip"),
-        (
-            "env: {clip: planar_jump}\ntask: {target_velocity: [1, 1]}",
-            "(config)",
-            "[WL19] gait goal",
-        ),
         (
             "env: {clip: planar_jump}\ntask: {gravity: [0.5, 1.5]}\n"
             "curriculum: {skill: {reference: {gravity: 2.0}}}",

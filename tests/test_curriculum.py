@@ -157,10 +157,3 @@ def test_without_widen_the_range_is_whole():
     assert c.width == 1.0
     tasks = c.next_tasks(500)
     assert tasks[:, 0].min() < 0.85 and tasks[:, 0].max() > 1.15
-
-
-def test_widen_is_refused_for_a_skill_clip():
-    with pytest.raises(ValueError, match="curriculum.widen"):
-        ExperimentConfig.model_validate(
-            {"character": "walker", "env": {"clip": "planar_jump"}, "curriculum": {"widen": {}}}
-        )

@@ -95,3 +95,25 @@ def test_a_new_method_is_one_class_and_one_registration(toy, tmp_path):
     assert np.allclose(again.parts["counter"].returns, trainer.parts["counter"].returns)
     other = ExperimentConfig.model_validate(TINY | {"task": {"left_leg_length": [0.8, 1.2]}})
     assert type(method_for(other)) is WL19  # the toy applies to its own configs only
+
+
+@pytest.mark.parametrize(
+    "data, reason",
+    [
+        ({"character": "humanoid"}, "character: 'humanoid' has no procedural [WL19] gait"),
+        ({"task": {"gravity": [0.5, 1.5]}}, "task.gravity: needs env.clip"),
+        ({"env": {"clip": "planar_jump"}, "task": {"target_velocity": [1, 1]}}, "gait goal"),
+        ({"env": {"clip": "planar_jump"}, "curriculum": {"widen": {}}}, "curriculum.widen:"),
+        ({"env": {"clip": "planar_jump", "retarget": True}}, "env.retarget:"),
+        ({"env": {"clip": "planar_jump", "deviation_limit": 0.5}}, "env.deviation_limit:"),
+        ({"env": {"deviation_limit": 0.5}}, "env.deviation_limit:"),
+    ],
+)
+def test_each_method_refuses_what_it_cannot_run_naming_the_field(data, reason):
+    """The rules of a method live with it: the config's data is valid, the method says no."""
+    from paramimic.config import ConfigError
+
+    cfg = ExperimentConfig.model_validate(data | {"name": "rules"})
+    with pytest.raises(ConfigError) as err:
+        method_for(cfg)
+    assert str(err.value).startswith("rules: ") and reason in str(err.value)

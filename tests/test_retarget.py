@@ -120,13 +120,6 @@ def test_the_env_imitates_the_retargeted_gait_and_refuses_characters_without_leg
             ExperimentConfig.model_validate({"character": character, "env": {"retarget": True}})
 
 
-def test_retarget_is_refused_for_a_skill_clip():
-    with pytest.raises(ValueError, match="env.retarget"):
-        ExperimentConfig.model_validate(
-            {"character": "walker", "env": {"retarget": True, "clip": "planar_jump"}}
-        )
-
-
 def test_a_shape_change_on_the_fly_retargets_the_reference():
     """[WL19] §5.2 with env.retarget: the reference the env imitates after `set_shape` is the new
     body's retargeted gait, at the same phase."""

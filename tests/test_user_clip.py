@@ -16,6 +16,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from paramimic.config import ConfigError, load_config
+from paramimic.training.preflight import PreflightError, preflight
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "paramimic" / "data" / "deepmimic" / "humanoid3d_jump.txt"
@@ -107,19 +108,23 @@ def test_clip_info_measures_each_shipped_clip(name):
     ids=["joint-count", "nan", "duration", "loop", "no-frames"],
 )
 def test_bad_clip_files_fail_before_anything_starts(tmp_path, edit, words):
+    """The train preflight parses the file (validating the config reads none)."""
     clip = _user_clip(tmp_path, edit)
-    with pytest.raises(ConfigError) as err:
-        load_config(_config(tmp_path, clip))
+    cfg = load_config(_config(tmp_path, clip))
+    with pytest.raises(PreflightError) as err:
+        preflight(cfg)
     assert "env.clip" in str(err.value) and words in str(err.value)
 
 
 def test_truncated_and_missing_files_are_named(tmp_path):
     clip = _user_clip(tmp_path)
     clip.write_text(clip.read_text()[:500])  # truncated JSON
-    with pytest.raises(ConfigError, match="not a DeepMimic clip"):
-        load_config(_config(tmp_path, clip))
-    with pytest.raises(ConfigError, match="does not exist"):
-        load_config(_config(tmp_path, tmp_path / "nowhere.txt"))
+    with pytest.raises(PreflightError, match="env.clip: .*not a DeepMimic clip"):
+        preflight(load_config(_config(tmp_path, clip)))
+    with pytest.raises(PreflightError, match="env.clip: cannot read .*nowhere.txt"):
+        preflight(load_config(_config(tmp_path, tmp_path / "nowhere.txt")))
+    with pytest.raises(ConfigError, match="env.clip 'nowhere' does not fit"):  # a name, no file
+        load_config(_config(tmp_path, "nowhere"))
 
 
 # two parameters declared from the measure library, as a user would write them in YAML
@@ -155,10 +160,10 @@ def test_a_clip_path_is_stored_absolute_and_may_start_with_home(tmp_path, monkey
     path, so a resume from another directory reads the same file."""
     monkeypatch.setenv("HOME", str(tmp_path))
     _user_clip(tmp_path)
-    cfg = load_config(_config(tmp_path, Path("~/my_jump.txt")))
+    cfg = preflight(load_config(_config(tmp_path, Path("~/my_jump.txt"))))
     assert cfg.env.clip == str(tmp_path.resolve() / "my_jump.txt")
     monkeypatch.chdir(tmp_path)
-    assert load_config(_config(tmp_path, Path("my_jump.txt"))).env.clip == cfg.env.clip
+    assert preflight(load_config(_config(tmp_path, Path("my_jump.txt")))).env.clip == cfg.env.clip
 
 
 def test_the_clip_travels_with_the_run_not_its_path(tmp_path):
@@ -167,7 +172,6 @@ def test_the_clip_travels_with_the_run_not_its_path(tmp_path):
     file moved), and resuming with the file in place is no config change."""
     from paramimic.config import ExperimentConfig, resume_conflicts
     from paramimic.envs import env_for
-    from paramimic.training.preflight import preflight
 
     clip = _user_clip(tmp_path)
     cfg = load_config(_config(tmp_path, clip))

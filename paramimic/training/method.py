@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from paramimic.config import EnvConfig, ExperimentConfig
+from paramimic.config import ConfigError, EnvConfig, ExperimentConfig
 from paramimic.curriculum.adaptive import AdaptiveCurriculum
 from paramimic.curriculum.skill import SkillCurriculum
 from paramimic.envs import env_for
@@ -63,6 +63,12 @@ class Method(ABC):
     def applies(cls, cfg: ExperimentConfig) -> bool:
         """Whether this method trains `cfg`."""
 
+    @classmethod
+    def problems(cls, cfg: ExperimentConfig) -> list[str]:
+        """What in `cfg` this method cannot run, each as 'field: reason' (the config's own
+        validation has passed: these are the rules of the method, not of the data)."""
+        return []
+
     def make_env(self, env: EnvConfig | None = None):
         """The method's env on this config (or on `env`, e.g. `cfg.env.for_evaluation()`)."""
         return env_for(self.cfg, env)
@@ -95,6 +101,24 @@ class WL19(Method):
     def applies(cls, cfg: ExperimentConfig) -> bool:
         return cfg.env.clip is None
 
+    @classmethod
+    def problems(cls, cfg: ExperimentConfig) -> list[str]:
+        from paramimic.characters import registration
+
+        out = []
+        measures = set(cfg.env.skill.measures)
+        for name in sorted(({"gravity", "jump_height"} | measures) & set(cfg.task)):
+            out.append(f"task.{name}: needs env.clip (the skill env); [WL19] gaits have no {name}")
+        if cfg.env.gait is None and registration(cfg.character).gait is None:
+            clips = sorted(registration(cfg.character).clips)
+            out.append(
+                f"character: {cfg.character!r} has no procedural [WL19] gait; set env.gait "
+                f"(a looping clip) or env.clip (one of {clips})"
+            )
+        if cfg.env.deviation_limit is not None and cfg.env.gait is None:
+            out.append("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
+        return out
+
     def new_curriculum(self, clip: dict | None = None) -> Curriculum:
         return AdaptiveCurriculum.from_config(self.cfg)
 
@@ -106,6 +130,25 @@ class L21(Method):
     @classmethod
     def applies(cls, cfg: ExperimentConfig) -> bool:
         return cfg.env.clip is not None
+
+    @classmethod
+    def problems(cls, cfg: ExperimentConfig) -> list[str]:
+        out = []
+        if cfg.curriculum.widen is not None:
+            out.append(
+                "curriculum.widen: a widening range is for [WL19] families (env.clip unset); "
+                "[L21] skills grow their explored region by the exploration curriculum"
+            )
+        if cfg.env.retarget:
+            out.append(
+                "env.retarget: retargets the character's [WL19] gait (env.clip unset); [L21] "
+                "skills adapt their clip by the motion displacement of P_θ"
+            )
+        if "target_velocity" in cfg.task:
+            out.append("task.target_velocity: a [WL19] gait goal; the skill env has none")
+        if cfg.env.deviation_limit is not None:
+            out.append("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
+        return out
 
     @cached_property
     def spaces(self) -> Spaces:
@@ -165,7 +208,12 @@ def register(method: type[Method]) -> type[Method]:
 
 
 def method_for(cfg: ExperimentConfig) -> Method:
+    """The method that trains `cfg`; ConfigError naming the field when the config asks for
+    what that method cannot do (checked before anything starts: the train preflight, play)."""
     for method in METHODS:
         if method.applies(cfg):
+            problems = method.problems(cfg)
+            if problems:
+                raise ConfigError(f"{cfg.name}: " + "; ".join(problems))
             return method(cfg)
-    raise ValueError(f"no training method applies to config {cfg.name!r}")
+    raise ConfigError(f"{cfg.name}: no training method applies to this config")

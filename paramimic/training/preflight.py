@@ -9,6 +9,7 @@ from pathlib import Path
 
 from paramimic.config import ExperimentConfig
 from paramimic.training import checkpoint
+from paramimic.training.method import method_for
 
 
 class PreflightError(ValueError):
@@ -16,31 +17,62 @@ class PreflightError(ValueError):
 
 
 def preflight(cfg: ExperimentConfig) -> ExperimentConfig:
-    """The run's config with the text of its clip files carried in it (`env.clip_texts`), once
-    the warm start's source (`train.init_from`) is found to be a checkpoint or a run directory
-    with one."""
+    """The run's config as it will run: its method's rules met (`method_for`), its clip files
+    named by absolute path with their text carried in it (`env.clip_texts`), parsed, a gait
+    that loops; and the warm start's source (`train.init_from`) a checkpoint or a run
+    directory with one."""
     _check_source(cfg.train.init_from)
-    return carry_clips(cfg)
+    cfg = carry_clips(cfg)
+    _check_clips(cfg)
+    method_for(cfg)
+    return cfg
 
 
 def carry_clips(cfg: ExperimentConfig) -> ExperimentConfig:
-    """`cfg` with the content of the clip files its `env.clip` / `env.gait` name in
-    `env.clip_texts` (built-in clips need none)."""
+    """`cfg` with the clip files its `env.clip` / `env.gait` name stored absolute (`~` expanded,
+    from the working directory: a resume from elsewhere names the same file) and their content
+    in `env.clip_texts` (built-in clips need none)."""
     from paramimic.characters import registration
 
     builtin = registration(cfg.character).clips
-    texts = dict(cfg.env.clip_texts)
+    texts, update = dict(cfg.env.clip_texts), {}
     for field in ("clip", "gait"):
         name = getattr(cfg.env, field)
-        if name is None or name in builtin or name in texts:
+        if name is None or name in builtin:
+            continue
+        if name not in texts:
+            name = str(Path(name).expanduser().resolve())
+            update[field] = name
+        if name in texts:
             continue
         try:
             texts[name] = Path(name).read_text()
         except OSError as e:
             raise PreflightError(f"env.{field}: cannot read {name}: {e}") from None
-    if texts == cfg.env.clip_texts:
+    if texts != cfg.env.clip_texts:
+        update["clip_texts"] = texts
+    if not update:
         return cfg
-    return cfg.model_copy(update={"env": cfg.env.model_copy(update={"clip_texts": texts})})
+    return cfg.model_copy(update={"env": cfg.env.model_copy(update=update)})
+
+
+def _check_clips(cfg: ExperimentConfig) -> None:
+    """Each clip parses in the character's format; a reference gait loops."""
+    from paramimic.characters import registration
+
+    for field in ("clip", "gait"):
+        name = getattr(cfg.env, field)
+        if name is None:
+            continue
+        try:
+            clip = registration(cfg.character).load_clip(name, cfg.env.clip_texts)
+        except (ValueError, KeyError) as e:
+            raise PreflightError(f"env.{field}: {e}") from None
+        if field == "gait" and clip.loop != "wrap":
+            raise PreflightError(
+                f"env.gait: clip {name!r} does not loop (Loop {clip.loop!r}); a [WL19] "
+                "reference gait must be cyclic; imitate it as a skill with env.clip"
+            )
 
 
 def _check_source(source: Path | None) -> None:
