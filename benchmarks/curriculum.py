@@ -29,7 +29,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(ROOT))
 
 
 def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dict:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
@@ -35,289 +34,43 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = ROOT / "runs" / "study"
-sys.path.insert(0, str(ROOT / "benchmarks"))
 EVAL_SEED = 2024  # never a training seed
 EVAL_EPISODES = 300
 CONFIG = "configs/walker_legs.yaml"
-# Every variant states the knobs the study varies, so that it means the same whatever the
-# config ships (configs/walker_legs.yaml now carries the winner, `retarget_stall`); a variant that
-# does not name env.retarget, the stall rule or the normalizer's floor runs without them
-# (`variant_config`), as it was measured (configs/biped_lower.yaml ships the floor).
-UNNAMED = {"env.retarget": False, "env.stall_speed_ratio": None, "ppo.obs_std_floor": 0.0}
-# the learned policy std of the first walker_legs recipe
-LEARNED = {"ppo.learn_std": True, "ppo.init_log_std": -1.0}
-FROZEN = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.2)}
-STD01 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.1)}
-STD005 = {"ppo.learn_std": False, "ppo.init_log_std": math.log(0.05)}
-G95 = {"ppo.gamma": 0.95}  # [WL19] Table 2
-G99 = {"ppo.gamma": 0.99}
-TABLE2 = {"ppo.policy_lr": 5e-5, "ppo.value_lr": 1e-4, "ppo.minibatch_size": 128}
-K0 = {"curriculum.k": 0.0}
-BASE_LEGS = "runs/study/base_legs_s{seed}"
-PRODUCT = {"env.reward.combine": "product"}
-RETARGET = {"env.retarget": True}
-STALL = {"env.stall_speed_ratio": 0.5}
-HEADING = {"env.heading_error_limit": 0.8}
-FLOOR = {"ppo.obs_std_floor": 0.02}
-# the walker study's widening ranges were promoted on falls alone (WidenConfig.promote_on)
-WIDEN_FALLS = {"curriculum.widen": {"promote_on": "falls"}}
-BIPED_BASE_RUN = "runs/study/biped_base_heading0.8_std0.1_s{seed}"  # the base biped, 2M steps
-BIPED_FLOOR_RUN = "runs/study/biped_base_heading0.8_std0.1_floor_s{seed}"  # 2M steps
-QUADRUPED_BASE_RUN = "runs/study/quadruped_base_stall_s{seed}"  # the base quadruped, 2M steps
-# a range grown from the base body in steps of 5 % of each range (the base controller, warm
-# started, falls on 57 % of bodies whose height alone varies by +-2.5 %: `fragility`)
-SLOW_WIDEN = {"curriculum.widen": {"start": 0.05, "step": 0.05, "promote_on": "falls"}}
-# the same steps judged at the range's edge by the deterministic policy (WidenConfig `edge`)
-EDGE_WIDEN = {
-    "curriculum.widen": {
-        "start": 0.05,
-        "step": 0.05,
-        "promote_on": "edge",
-        "window": 16,
-        "promote_below": 0.25,
-        "check_every": 10,
-    }
-}
+# The variants (benchmarks/family_study.yaml): each states the knobs the study varies, so that it
+# means the same whatever the config ships (configs/walker_legs.yaml now carries the winner,
+# `retarget_stall`).
+STUDY = yaml.safe_load((ROOT / "benchmarks" / "family_study.yaml").read_text())
 VARIANTS: dict[str, dict] = {
-    # PPO as first shipped (learned std from e^-1, gamma 0.95), the rule fixes in
-    "learned_std": LEARNED | G95,
-    "k0": LEARNED | G95 | K0,
-    "kl_adaptive": LEARNED | G95 | {"ppo.desired_kl": 0.01},
-    "table2_steps": LEARNED | G95 | TABLE2,
-    "std_frozen": FROZEN | G95,
-    "std_frozen_k0": FROZEN | G95 | K0,
-    "std_frozen_kl_adaptive": FROZEN | G95 | {"ppo.desired_kl": 0.01},
-    "std_frozen_table2": FROZEN | G95 | TABLE2,
-    "std_0.1": STD01 | G95,
-    "std_frozen_batch16k": FROZEN | G95 | {"ppo.num_steps": 16384, "ppo.minibatch_size": 2048},
-    # the base body alone (legs fixed at 1.0, the family's env layout): the warm start's source
-    "base_legs": FROZEN
-    | G95
-    | {"task.left_leg_length": [1.0, 1.0], "task.right_leg_length": [1.0, 1.0]},
-    # the family from the base body's controller (run base_legs with the same seed first)
-    "warm_std_frozen": FROZEN | G95 | {"train.init_from": BASE_LEGS},
-    # the range grows from the base body as it is mastered (curriculum.widen), k = 10 inside it
-    "widen_std_frozen": FROZEN | G95 | WIDEN_FALLS,
-    "warm_widen_std_frozen": FROZEN | G95 | WIDEN_FALLS | {"train.init_from": BASE_LEGS},
-    # the best recipe without retargeting and its uniform-sampling twin
-    "std_frozen_gamma99": FROZEN | G99,
-    "std_frozen_gamma99_k0": FROZEN | G99 | K0,
-    "std_frozen_gamma99_widen": FROZEN | G99 | WIDEN_FALLS,
-    # every surviving recipe stands more than it walks (0.2 m/s): the COM-velocity term
-    # (w4, 1 of the walker's 14) weighed 4x, alone and with the widening range
-    "std_frozen_gamma99_vel4": FROZEN | G99 | {"env.reward.w_com_velocity": 4.0},
-    "std_frozen_gamma99_vel4_widen": FROZEN
-    | G99
-    | WIDEN_FALLS
-    | {"env.reward.w_com_velocity": 4.0},
-    # standing still stops paying: the episode ends below half the target speed (2 s average)
-    "std_frozen_gamma99_stall": FROZEN | G99 | {"env.stall_speed_ratio": 0.5},
-    "std_frozen_gamma99_stall_widen": FROZEN | G99 | WIDEN_FALLS | {"env.stall_speed_ratio": 0.5},
-    # the bells multiplied, not added (env.reward.combine): standing still stops paying half
-    # of a walking step (the sum's end-effector, direction and torque bells)
-    # (measured with the stall rule, which walker_legs.yaml shipped by then and variant_config
-    # did not yet switch off for variants that do not name it: STALL keeps what they measured)
-    "product": FROZEN | G99 | PRODUCT | STALL,
-    "product_g95": FROZEN | G95 | PRODUCT | STALL,
-    # every leg follows the base leg's hip-to-ankle path scaled by the shortest leg
-    # (env.retarget): a reference that bodies with legs of unequal length can follow; with the
-    # stall rule, the winner: what configs/walker_legs.yaml ships (`_k0`: uniform sampling)
-    "retarget": FROZEN | G99 | RETARGET,
-    "retarget_stall": FROZEN | G99 | RETARGET | STALL,
-    "retarget_stall_k0": FROZEN | G99 | RETARGET | STALL | K0,
-    # the winning recipe on the [WL19] §5.3 3D characters (the issue's other target rows)
-    "biped_base": FROZEN | G99,
-    # the base biped turns away from its target and falls after it (`headings biped_base`: 16 of
-    # 20 episodes fell after facing 1.0-3.1 rad off): the episode ends beyond the limit
-    "biped_base_heading0.5": FROZEN | G99 | {"env.heading_error_limit": 0.5},
-    "biped_base_heading0.8": FROZEN | G99 | HEADING,
-    # its failing seed runs 1.44 m/s for a 1 m/s target: the COM-velocity bell weighed 4x
-    "biped_base_heading0.8_vel4": FROZEN | G99 | HEADING | {"env.reward.w_com_velocity": 4.0},
-    # half the exploration noise: a 3D body balances in roll as well as pitch
-    "biped_base_heading0.8_std0.1": STD01 | G99 | HEADING,
-    "biped_x0.5": FROZEN | G99,
-    "biped_x0.5_std0.1": STD01 | G99 | HEADING,
-    # its seeds stalled at a training return of ~22 (the base body's: 115 at 1.4M): the family
-    # with uniform sampling, and with only the global scales varying (every body symmetric)
-    "biped_x0.5_std0.1_k0": STD01 | G99 | HEADING | K0,
-    "biped_x0.5_std0.1_global": STD01 | G99 | HEADING,
-    # symmetric bodies learn faster (global: 34 at 0.6M against 20): the legs retargeted
-    "biped_x0.5_std0.1_retarget": STD01 | G99 | HEADING | RETARGET,
-    # the family grown from the base body, warm started from the base biped
-    "biped_x0.5_std0.1_warm_widen": STD01
-    | G99
-    | HEADING
-    | SLOW_WIDEN
-    | {"train.init_from": BIPED_BASE_RUN},
-    # its updates move the policy far: approx. KL 0.1-0.2 per update by 1.3M, 0.54 at 10M (std 0.1
-    # makes a small step of the mean a large KL): a 4x smaller policy step
-    "biped_x0.5_std0.1_lr5e-5": STD01 | G99 | HEADING | {"ppo.policy_lr": 5e-5},
-    # its training episodes fall with the policy's noise (85 %; the base body's 40 % at 2M,
-    # 79 % with std 0.2): half of it again
-    "biped_x0.5_std0.05": STD005 | G99 | HEADING,
-    # warm started, promoted below 50 % training falls, the range grew to 0.2 by 2M; its
-    # controller then falls on 2.5 % of x0.05 bodies (the base body's: 67.5 %), 72.5 % of x0.25
-    # ones (`fragility`): a range grown faster, below 70 % training falls (the base body's own
-    # training episodes fell 40 % with the policy's noise, its held-out ones 2 %)
-    "biped_x0.5_std0.1_warm_widen0.7": STD01
-    | G99
-    | HEADING
-    | {"curriculum.widen": SLOW_WIDEN["curriculum.widen"] | {"promote_below": 0.7}}
-    | {"train.init_from": BIPED_BASE_RUN},
-    # the base biped's gait is a knife edge in the body's height (`fragility`: 57.5 % falls at
-    # +-2.5 %): the recipe on bodies jittered that much (x0.05), from scratch
-    "biped_x0.05_std0.1": STD01 | G99 | HEADING,
-    # its training return stayed at 38 by 2M (the base body's: 176): the same bodies, the
-    # policy blind to them (env.observe_shape false: its shape inputs are the base body's)
-    "biped_x0.05_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
-    # blind to the shape it learned faster (62 against 38 at 1.23M; the base body: 104): the
-    # x0.5 family blind; and without the [WL19] Eq. 1 ground fit of the initial posture, which
-    # moves an x0.5 body's joints up to 0.5 rad off its reference (0.05 at x0.05), a jerk at
-    # the first step when the servos pull them back
-    "biped_x0.5_std0.1_blind": STD01 | G99 | HEADING | {"env.observe_shape": False},
-    "biped_x0.5_std0.1_nofit": STD01 | G99 | HEADING | {"env.ground_fit": False},
-    # the base gait hinges on the torso (`sensitivity`: 90-100 % falls with the torso 2 % shorter
-    # or taller): its height in the root frame, held by a stiff ball joint, varied by 0.2-0.7 mm
-    # in the base body's training, so 2 % moved that input 5-17 sigma: the normalizer's std
-    # floored at 2 cm / 0.02 rad (ppo.obs_std_floor), on the base body and the x0.5 family
-    "biped_base_heading0.8_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
-    "biped_x0.5_std0.1_floor": STD01 | G99 | HEADING | FLOOR,
-    # the floored base controller falls on 15 % of x0.05 bodies (without the floor: 67.5 %): the
-    # x0.5 family from it, legs retargeted (what is left of its fragility is one-sided legs)
-    "biped_x0.5_std0.1_floor_warm": STD01
-    | G99
-    | HEADING
-    | FLOOR
-    | RETARGET
-    | {"train.init_from": BIPED_FLOOR_RUN},
-    # what made the quadruped family from its base controller meet its target: a small step
-    "biped_x0.5_std0.1_floor_warm_kl": STD01
-    | G99
-    | HEADING
-    | FLOOR
-    | RETARGET
-    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
-    # the same, the range grown from the base body (the unfloored base's widening reached 20 % of
-    # the ranges by 2M with the full step, where its near family was learned: `fragility`)
-    "biped_x0.5_std0.1_floor_warm_widen_kl": STD01
-    | G99
-    | HEADING
-    | FLOOR
-    | RETARGET
-    | SLOW_WIDEN
-    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
-    # its range grew by 5 % per 0.04-0.6M steps (20 % at 1.3M), promoted below 50 % training falls
-    # where the base body's own training episodes fell 40 % with the policy's noise: below 60 %
-    # (with the full step, below 70 % collapsed the controller: `_warm_widen0.7`)
-    "biped_x0.5_std0.1_floor_warm_widen0.6_kl": STD01
-    | G99
-    | HEADING
-    | FLOOR
-    | RETARGET
-    | {"curriculum.widen": SLOW_WIDEN["curriculum.widen"] | {"promote_below": 0.6}}
-    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
-    # the range judged by ADR's boundary test instead: every 10 iterations, the mean action on 16
-    # bodies at the range's edge; it grows 5 % when fewer than 25 % of them fell
-    "biped_x0.5_std0.1_floor_warm_edge_kl": STD01
-    | G99
-    | HEADING
-    | FLOOR
-    | RETARGET
-    | EDGE_WIDEN
-    | {"train.init_from": BIPED_FLOOR_RUN, "ppo.desired_kl": 0.01},
-    "quadruped_x0.5": FROZEN | G99,
-    # its seed 0 stood at 10M (16.7 % falls at 0.11 m/s) and turned in place (`headings
-    # quadruped_x0.5`: 12 of 20 episodes faced more than 1.2 rad off): the biped's recipe, and
-    # that with the walker's stall rule
-    "quadruped_x0.5_retarget": FROZEN | G99 | RETARGET,
-    # retargeted, it stands steadier (5-11 % falls at 2M) but still at 0.17-0.18 m/s: with the
-    # stall rule that made walker_legs walk once it joined the retargeted reference
-    "quadruped_x0.5_retarget_stall": FROZEN | G99 | RETARGET | STALL,
-    # with the stall rule its training return stayed at ~45 to 1M (episodes end at the stall
-    # window): can the base quadruped walk at all with this reference and reward?
-    "quadruped_base_stall": FROZEN | G99 | STALL,
-    # it walks (training return 213 at 0.94M, 0 % held-out falls at 2M): the x0.5 family from its
-    # controller, legs retargeted, the stall rule kept
-    "quadruped_x0.5_warm_stall": FROZEN
-    | G99
-    | RETARGET
-    | STALL
-    | {"train.init_from": QUADRUPED_BASE_RUN},
-    # its held-out falls grew from 3M to 5M (22 -> 30 %) while the updates' approx. KL climbed
-    # (0.25 -> 0.8) with 72-77 % of samples clipped: smaller policy steps, [WL19] Table 2's
-    # policy step size or rsl_rl's KL-adapted one
-    "quadruped_x0.5_warm_stall_lr5e-5": FROZEN
-    | G99
-    | RETARGET
-    | STALL
-    | {"train.init_from": QUADRUPED_BASE_RUN, "ppo.policy_lr": 5e-5},
-    "quadruped_x0.5_warm_stall_kl": FROZEN
-    | G99
-    | RETARGET
-    | STALL
-    | {"train.init_from": QUADRUPED_BASE_RUN, "ppo.desired_kl": 0.01},
-    "quadruped_x0.5_std0.1_heading": STD01 | G99 | HEADING,
-    "quadruped_x0.5_std0.1_heading_stall": STD01 | G99 | HEADING | STALL,
+    name: {k: v for b in spec["uses"] for k, v in STUDY["blocks"][b].items()} | spec.get("set", {})
+    for name, spec in STUDY["variants"].items()
 }
-# variants whose bodies vary only by the global scales b_g (symmetric bodies)
-GLOBAL_ONLY = frozenset({"biped_x0.5_std0.1_global"})
-# variants on another config: (config, shape scale s: every shape range shrunk toward the base
-# body, lo' = 1 - s(1 - lo), hi' = 1 + s(hi - 1); s = 0 is the base body alone)
-OTHER_CONFIGS: dict[str, tuple[str, float]] = {
-    "biped_base": ("configs/biped_lower.yaml", 0.0),
-    "biped_base_heading0.5": ("configs/biped_lower.yaml", 0.0),
-    "biped_base_heading0.8": ("configs/biped_lower.yaml", 0.0),
-    "biped_base_heading0.8_vel4": ("configs/biped_lower.yaml", 0.0),
-    "biped_base_heading0.8_std0.1": ("configs/biped_lower.yaml", 0.0),
-    "biped_x0.5": ("configs/biped_lower.yaml", 0.5),
-    "quadruped_x0.5": ("configs/quadruped.yaml", 0.5),
-    "quadruped_x0.5_std0.1_heading": ("configs/quadruped.yaml", 0.5),
-    "quadruped_x0.5_std0.1_heading_stall": ("configs/quadruped.yaml", 0.5),
-    "biped_x0.5_std0.1": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_k0": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_global": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_retarget": ("configs/biped_lower.yaml", 0.5),
-    "quadruped_x0.5_retarget": ("configs/quadruped.yaml", 0.5),
-    "quadruped_x0.5_retarget_stall": ("configs/quadruped.yaml", 0.5),
-    "quadruped_base_stall": ("configs/quadruped.yaml", 0.0),
-    "quadruped_x0.5_warm_stall": ("configs/quadruped.yaml", 0.5),
-    "quadruped_x0.5_warm_stall_lr5e-5": ("configs/quadruped.yaml", 0.5),
-    "quadruped_x0.5_warm_stall_kl": ("configs/quadruped.yaml", 0.5),
-    "biped_x0.5_std0.1_warm_widen": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_lr5e-5": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.05": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.05_std0.1": ("configs/biped_lower.yaml", 0.05),
-    "biped_x0.05_std0.1_blind": ("configs/biped_lower.yaml", 0.05),
-    "biped_x0.5_std0.1_blind": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_nofit": ("configs/biped_lower.yaml", 0.5),
-    "biped_base_heading0.8_std0.1_floor": ("configs/biped_lower.yaml", 0.0),
-    "biped_x0.5_std0.1_floor": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_floor_warm": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_floor_warm_kl": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_floor_warm_widen_kl": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_floor_warm_widen0.6_kl": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_floor_warm_edge_kl": ("configs/biped_lower.yaml", 0.5),
-    "biped_x0.5_std0.1_warm_widen0.7": ("configs/biped_lower.yaml", 0.5),
-}
+
+
+def _shrunk(character: str, scale: float) -> dict[str, list[float]]:
+    """Config overrides putting the character's shape ranges, shrunk by `scale`, in the task."""
+    from paramimic.characters import registration
+
+    return {f"task.{k}": list(v) for k, v in registration(character).shape_ranges(scale).items()}
 
 
 def variant_config(variant: str, seed: int) -> tuple[str, dict]:
-    """The config file and the overrides of a variant (the shape ranges of other configs' ones)."""
-    config, scale = OTHER_CONFIGS.get(variant, (CONFIG, 1.0))
+    """The config file and the overrides of a variant (the shape ranges of other configs' ones:
+    every range shrunk toward the base body by the variant's `shape_scale`)."""
+    spec = STUDY["variants"][variant]
+    config, scale = spec.get("config", CONFIG), spec.get("shape_scale", 1.0)
     overrides = {
         k: ROOT / v.format(seed=seed) if k == "train.init_from" else v
-        for k, v in (UNNAMED | VARIANTS[variant]).items()
+        for k, v in (STUDY["unnamed"] | VARIANTS[variant]).items()
     }
     if scale != 1.0:
-        from normalization import shrunk_shape_ranges
-
-        character = Path(config).stem
-        overrides |= shrunk_shape_ranges(character, scale)
-    if variant in GLOBAL_ONLY:  # the parts' own scales b_l stay at the base body's
+        overrides |= _shrunk(Path(config).stem, scale)
+    if spec.get("global_only"):  # the parts' own scales b_l stay at the base body's
         overrides |= {k: [1.0, 1.0] for k in overrides if k.startswith("task.")
                       and not k.startswith("task.global_")}  # fmt: skip
     return config, overrides
@@ -337,8 +90,7 @@ def run(variant: str, seed: int, steps: int) -> dict:
     warnings.filterwarnings("ignore")
     from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
-    from paramimic.training import checkpoint
-    from paramimic.training.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import train_serial
 
     run_dir = RUNS / f"{variant}_s{seed}"
     config, variant_overrides = variant_config(variant, seed)
@@ -348,15 +100,8 @@ def run(variant: str, seed: int, steps: int) -> dict:
         "train.torch_threads": 1,
     }
     cfg = load_config(ROOT / config, overrides)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    trainer = Trainer(cfg, run_dir)
-    latest = checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST
-    if latest.exists():
-        trainer.load_state_dict(checkpoint.load(latest))
-    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
     t0 = time.perf_counter()
-    trainer.train(backend, steps)
-    backend.close()
+    trainer = train_serial(cfg, steps, run_dir)
     report = evaluate_config(trainer.learner.policy, cfg, EVAL_EPISODES, EVAL_SEED, 7, seconds=10.0)
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
     report |= {
@@ -431,8 +176,6 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     parameters varying or only one group. Writes study_fragility_<variant>_s<seed>_<M>M.json
     (M: the checkpoint's env steps)."""
     warnings.filterwarnings("ignore")
-    from normalization import shrunk_shape_ranges
-
     from paramimic.config import load_config
     from paramimic.envs import env_for
 
@@ -440,7 +183,7 @@ def fragility(variant: str, seed: int, episodes: int = 40) -> dict:
     state, env = _run_state(variant, seed)
     rows = []
     for scale, prefix in FRAGILITY_FAMILIES:
-        ranges = shrunk_shape_ranges(Path(config).stem, scale)
+        ranges = _shrunk(Path(config).stem, scale)
         ranges = {k: r if k.startswith(f"task.{prefix}") else [1.0, 1.0] for k, r in ranges.items()}
         cfg = load_config(ROOT / config, {"env": env} | ranges)
         policy = _adopted(state, cfg)
@@ -549,8 +292,6 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     in one shape parameter by 2 %: falls and forward speed per parameter and value, the base
     body first. Writes study_sensitivity_<variant>_s<seed>_<M>M.json."""
     warnings.filterwarnings("ignore")
-    from normalization import shrunk_shape_ranges
-
     from paramimic.config import load_config
     from paramimic.envs import env_for
     from paramimic.rl.ppo import CONSTANT
@@ -558,7 +299,7 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
     config = variant_config(variant, seed)[0]
     state, env = _run_state(variant, seed)
     # ranges wide enough to hold every value moved (x0.2: global 0.9-1.1, parts 0.94-1.04)
-    cfg = load_config(ROOT / config, {"env": env} | shrunk_shape_ranges(Path(config).stem, 0.2))
+    cfg = load_config(ROOT / config, {"env": env} | _shrunk(Path(config).stem, 0.2))
     policy = _adopted(state, cfg)
     env_cfg = cfg.env.for_evaluation(10.0)
     probe_env = env_for(cfg, env_cfg)
@@ -819,14 +560,12 @@ def fit_offsets(resets: int = 10) -> dict:
     reference pose (init_noise 0): per shape scale, the largest joint offset (rad) of each
     reset. Writes study_fit_offsets.json."""
     warnings.filterwarnings("ignore")
-    from normalization import shrunk_shape_ranges
-
     from paramimic.config import load_config
     from paramimic.envs import env_for
 
     rows = []
     for scale in (0.0, 0.05, 0.5):
-        overrides = shrunk_shape_ranges("biped_lower", scale) | {"env.init_noise": 0.0}
+        overrides = _shrunk("biped_lower", scale) | {"env.init_noise": 0.0}
         cfg = load_config(ROOT / "configs/biped_lower.yaml", overrides)
         env = env_for(cfg).unwrapped
         offsets = []

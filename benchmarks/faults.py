@@ -45,13 +45,13 @@ import httpx
 import psutil
 import redis
 import yaml
+from tabulate import tabulate
+
+from services.keys import RunKeys
+from services.launch.redis_server import EmbeddedRedis
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(ROOT))
-from benchmarks.markdown import markdown_table  # noqa: E402
-from services.keys import RunKeys  # noqa: E402
-from services.launch.redis_server import EmbeddedRedis  # noqa: E402
 
 FAULTS = ("actor", "sampler", "redis", "api", "learner", "actor_stop", "disk_full", "corrupt")
 RECOVERY_LIMIT = 240.0  # seconds after which an injection counts as not recovered
@@ -60,6 +60,11 @@ CONFIG = {
     "ppo": {"num_steps": 1024, "minibatch_size": 256, "num_epochs": 2},
     "train": {"total_steps": 10**9, "checkpoint_every": 2},
 }
+
+
+def _table(header, rows) -> str:
+    """A GitHub Markdown table."""
+    return tabulate(list(rows), headers=list(header), tablefmt="github", disable_numparse=True)
 
 
 class Job:
@@ -320,7 +325,7 @@ def table(rows: list[dict]) -> str:
         left = ", ".join(r["processes_left"]) or "0"
         lost = f"{r['episodes_lost']} / {r['episodes_double_counted']}"
         lines.append([r["fault"], r["injected"], counts, lost, r["elites_lost"], rec, left])
-    return markdown_table(header, lines)
+    return _table(header, lines)
 
 
 def main() -> None:

@@ -45,15 +45,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
+from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(ROOT))
-from benchmarks.markdown import markdown_table  # noqa: E402
 
 DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
@@ -75,6 +73,11 @@ SKILL_TARGETS = {
     "humanoid_cartwheel": ("rotation", 0.80, None, 17_000_000),
 }
 PAUSE = 600.0  # s: a gap between iterations longer than this is a stopped-and-resumed run
+
+
+def _table(header, rows) -> str:
+    """A GitHub Markdown table."""
+    return tabulate(list(rows), headers=list(header), tablefmt="github", disable_numparse=True)
 
 
 def training_wall_clock(run: Path) -> float:
@@ -357,7 +360,7 @@ def _speed_table() -> str:
     if rllib is not None:
         rows.append(["RLlib PPO, same env, network, batch and epochs", f"{rllib:,.0f}",
                      f"ours {ours / rllib:.2f}x", verdict(ours / rllib, 1.5)])  # fmt: skip
-    return markdown_table(["arm", "env steps/s", "ratio", "target"], rows)
+    return _table(["arm", "env steps/s", "ratio", "target"], rows)
 
 
 def _screens_table(screens: list[dict]) -> str:
@@ -374,7 +377,7 @@ def _screens_table(screens: list[dict]) -> str:
          f"{r['mean_body_error']:.3f}"]
         for r in sorted(screens, key=lambda r: (r["config"], r["budget_s"], r["label"], r["seed"]))
     ]  # fmt: skip
-    return markdown_table(header, rows)
+    return _table(header, rows)
 
 
 def _write_section(marks: tuple[str, str], body: str) -> None:
@@ -420,7 +423,7 @@ def _write_docs(rows: dict[str, list]) -> None:
             f"{mean['fall_percent']:.1f} %, body error {mean['mean_body_error']:.3f} m, speed "
             f"{mean['speed_ratio']:.2f}x the clip's, root drift {mean['mean_root_drift']:.2f} m."
         )
-    _write_section(MARK, markdown_table(header, lines) + "\n\n" + "\n".join(verdicts))
+    _write_section(MARK, _table(header, lines) + "\n\n" + "\n".join(verdicts))
 
 
 def main() -> None:

@@ -59,7 +59,7 @@ def _train_ours(
 
     from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
-    from paramimic.training.trainer import SerialBackend, Trainer
+    from paramimic.training.trainer import train_serial
 
     cfg = load_config(
         ROOT / config, {**overrides, "train.run_dir": str(run_dir), "train.seed": seed}
@@ -85,9 +85,7 @@ def _train_ours(
         finally:
             ray.shutdown()
     else:
-        trainer = Trainer(cfg, run_dir)
-        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
-        trainer.train(backend, steps)
+        trainer = train_serial(cfg, steps, run_dir)
     train_seconds = time.perf_counter() - t0
     report = evaluate_config(
         trainer.learner.policy, cfg, EVAL_EPISODES, EVAL_SEED, 5, seconds=eval_seconds

@@ -36,12 +36,14 @@ import json
 import shutil
 import subprocess
 import sys
+import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from learning import RESULTS, ROOT, _train_ours  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+EVAL_EPISODES, EVAL_SEED = 300, 2024  # shapes no training run draws
 
 CHARACTERS = ("biped_lower", "quadruped")
 STAGES = tuple(f"{c}_{rn}" for c in CHARACTERS for rn in ("rn", "no_rn"))
@@ -56,17 +58,36 @@ PPO_PRESETS = {
 def shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
     """Every shape range of the character shrunk toward 1 by `scale` (the config's
     `shape_scale`, as task ranges: the runs measured before it existed name them so)."""
-    from paramimic.characters import get_character
-    from paramimic.config import ExperimentConfig
+    from paramimic.characters import registration
 
-    cfg = {"character": character, "shape_space": "full", "shape_scale": scale}
-    task = ExperimentConfig.model_validate(cfg).task
-    return {p.name: list(task[p.name]) for p in get_character(character).shape_params}
+    return {k: list(v) for k, v in registration(character).shape_ranges(scale).items()}
 
 
 def shrunk_shape_ranges(character: str, scale: float) -> dict[str, list[float]]:
     """Config overrides putting the shrunk shape ranges in the task space."""
     return {f"task.{name}": r for name, r in shape_ranges(character, scale).items()}
+
+
+def _train_and_evaluate(config: str, steps: int, overrides: dict, run_dir: Path, seed: int):
+    """A serial run of `config` from scratch, evaluated on EVAL_EPISODES held-out shapes with
+    the [WL19] horizon."""
+    import torch
+
+    from paramimic.config import load_config
+    from paramimic.evaluation import evaluate_config
+    from paramimic.training.trainer import train_serial
+
+    cfg = load_config(
+        ROOT / config, overrides | {"train.run_dir": str(run_dir), "train.seed": seed}
+    )
+    torch.manual_seed(seed)
+    t0 = time.perf_counter()
+    trainer = train_serial(cfg, steps, run_dir)
+    seconds = time.perf_counter() - t0
+    policy = trainer.learner.policy
+    report = evaluate_config(policy, cfg, EVAL_EPISODES, EVAL_SEED, 5, seconds=EVAL_SECONDS)
+    return report | {"env_steps": trainer.progress.env_steps, "train_seconds": seconds,
+                     "config": config, "overrides": overrides}  # fmt: skip
 
 
 def run_stage(
@@ -81,9 +102,7 @@ def run_stage(
     overrides = {"env.reward.normalize": normalize} | PPO_PRESETS[ppo]
     if shape_scale != 1.0:
         overrides |= shrunk_shape_ranges(character, shape_scale)
-    report = _train_ours(
-        f"configs/{character}.yaml", steps, overrides, run_dir, seed, eval_seconds=EVAL_SECONDS
-    )
+    report = _train_and_evaluate(f"configs/{character}.yaml", steps, overrides, run_dir, seed)
     report.update({"stage": stage, "character": character, "normalize": normalize, "seed": seed})
     report.update({"budget_steps": steps, "shape_scale": shape_scale, "ppo": ppo})
     RESULTS.mkdir(parents=True, exist_ok=True)

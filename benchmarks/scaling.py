@@ -24,15 +24,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import ray
+
+from paramimic.config import load_config
+from services.launch.local_cluster import LocalCluster
+from services.launch.redis_server import EmbeddedRedis
+from services.launch.stack import ray_stack
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-import ray  # noqa: E402
-
-from paramimic.config import load_config  # noqa: E402
-from services.launch.local_cluster import LocalCluster  # noqa: E402
-from services.launch.redis_server import EmbeddedRedis  # noqa: E402
-from services.launch.stack import ray_stack  # noqa: E402
 
 
 def measure(cfg, address: str, node_ip: str, redis_url: str, rounds: int) -> dict:

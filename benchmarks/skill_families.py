@@ -21,16 +21,14 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
-import sys
 from pathlib import Path
 
 import numpy as np
+from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = RESULTS / "skill_families_runs"
-sys.path.insert(0, str(ROOT))
-from benchmarks.markdown import markdown_table  # noqa: E402
 
 # family -> ([L21] Table 1 skill, its episodes N, its ER); None where the paper has no such row
 FAMILIES = {
@@ -40,6 +38,11 @@ FAMILIES = {
     "humanoid_cartwheel": ("Cartwheel", 3.5e6, 1.0),
     "humanoid_run": (None, None, None),
 }
+
+
+def _table(header, rows) -> str:
+    """A GitHub Markdown table."""
+    return tabulate(list(rows), headers=list(header), tablefmt="github", disable_numparse=True)
 
 
 def one(job: tuple) -> dict:
@@ -104,7 +107,7 @@ def table(rows: list[dict]) -> str:
         lines.append([r["family"], f"{r['steps'] / 1e6:.2f}M", f"{r['episodes']:,}",
                       f"{r['stage']} / {r['phase']}", f"{r['explored_ratio']:.2f}", elites,
                       cover, paper])  # fmt: skip
-    return markdown_table(header, lines)
+    return _table(header, lines)
 
 
 def main() -> None:

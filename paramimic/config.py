@@ -653,13 +653,11 @@ class ExperimentConfig(Section):
             if env.get("frame_skip") is None:
                 data["env"] = env | {"physics_hz": registration.physics_hz}
         if data.get("shape_space") == "full" and isinstance(data.get("task", {}), dict):
-            params = registration.character.shape_params
-            if not params:
+            if not registration.character.shape_params:
                 raise ValueError(f"shape_space: {registration.name!r} has no shape parameters")
             s = data.get("shape_scale", 1.0)
             if isinstance(s, int | float) and 0 <= s <= 1:
-                full = {p.name: (1 - s * (1 - p.low), 1 + s * (p.high - 1)) for p in params}
-                data["task"] = full | dict(data.get("task") or {})
+                data["task"] = registration.shape_ranges(s) | dict(data.get("task") or {})
         return data
 
     @model_validator(mode="after")

@@ -112,6 +112,14 @@ class Registration:
             raise ValueError(f"clip file {clip} does not exist")
         return self.clip_file(path)
 
+    def shape_ranges(self, scale: float = 1.0) -> dict[str, tuple[float, float]]:
+        """Every documented shape range shrunk toward the base body by `scale`:
+        [1 - s(1 - lo), 1 + s(hi - 1)] (1: as documented; 0: the base body alone)."""
+        return {
+            p.name: (1 - scale * (1 - p.low), 1 + scale * (p.high - 1))
+            for p in self.character.shape_params
+        }
+
     @property
     def title(self) -> str:
         """The CamelCase name of gymnasium ids: biped_lower -> BipedLower."""

@@ -362,6 +362,23 @@ class Trainer:
                 )
 
 
+def train_serial(cfg: ExperimentConfig, steps: int, run_dir: Path | None = None) -> Trainer:
+    """Train `cfg` in this process to `steps` env steps (`paramimic train --serial` without
+    Redis or the API), continuing from the run directory's latest checkpoint when it has one;
+    returns the trainer (its `learner.policy` is the controller)."""
+    run_dir = Path(run_dir or cfg.resolved_run_dir())
+    trainer = Trainer(cfg, run_dir)
+    latest = checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST
+    if latest.exists():
+        trainer.load_state_dict(checkpoint.load(latest))
+    backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+    try:
+        trainer.train(backend, steps)
+    finally:
+        backend.close()
+    return trainer
+
+
 def _logged_steps(row: str) -> float:
     """The env steps of a metrics.jsonl row; a torn row (the process killed mid-write): inf."""
     try:
