@@ -5,6 +5,7 @@ code before that change (commit 171d3ab); regenerate it only for a change meant 
 training (`python tests/test_behaviour_unchanged.py`)."""
 
 import json
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -66,3 +67,45 @@ if __name__ == "__main__":
     out = {name: serial_metrics(name) for name in CONFIGS}
     GOLDEN.write_text(json.dumps(out, indent=1, sort_keys=True))
     print(f"wrote {GOLDEN}", file=sys.stderr)
+
+
+BEFORE = Path(__file__).parent / "data" / "runs_before_training_moved"
+
+
+@pytest.mark.parametrize("name", sorted(CONFIGS))
+def test_a_run_written_before_the_move_resumes_and_evaluates(name, tmp_path):
+    """A run directory and Redis state written by the code before the move (commit 171d3ab,
+    `tests/data/runs_before_training_moved/make.py`): the sampler reloads the curriculum as the
+    old one stored it, the trainer resumes the checkpoint and trains on, and the controller
+    evaluates."""
+    import redis
+    import yaml
+
+    from paramimic.evaluation import evaluate_config
+    from paramimic.training import checkpoint
+    from paramimic.training.method import method_for
+    from services.keys import RunKeys
+    from services.launch.redis_server import EmbeddedRedis
+    from services.sampler.service import SamplerService
+
+    run = tmp_path / name
+    shutil.copytree(BEFORE / name, run, ignore=shutil.ignore_patterns("make.py"))
+    cfg = ExperimentConfig.model_validate(yaml.safe_load((run / "config.yaml").read_text()))
+    run_id = f"compat-{name}"
+    with EmbeddedRedis(run / "redis", password="compat") as server:
+        stored = redis.Redis.from_url(server.url).hget(RunKeys(run_id).curriculum, "summary")
+        clip = method_for(cfg).spaces.clip_setup()
+        sampler = SamplerService(cfg.model_dump(mode="json"), server.url, run_id, clip=clip)
+        summary = json.loads(json.dumps(sampler.curriculum.summary().to_dict()))
+        old = json.loads(stored)
+        assert summary["episodes"] == old["episodes"] > 0
+        shared = old.keys() & summary.keys()
+        assert {k: summary[k] for k in shared} == {k: old[k] for k in shared}
+        trainer = Trainer(cfg, run, sampler)
+        trainer.load_state_dict(checkpoint.load(run))
+        assert trainer.progress.iteration == 2
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+        trainer.train(backend, total_steps=3 * 256)
+        assert trainer.progress.iteration == 3
+    report = evaluate_config(trainer.learner.policy, cfg, 2, 7, 1, seconds=1.0)
+    assert report["episodes"] == 2
