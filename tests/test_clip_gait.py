@@ -203,7 +203,7 @@ def test_configs_name_a_clip_gait_plainly(tmp_path):
     assert cfg.env.gait == "humanoid_walk" and cfg.env.clip is None
     bad = [
         ({"gait": "humanoid_walk", "clip": "humanoid_walk"}, "not both"),
-        ({"gait": "humanoid_dance"}, "env.gait 'humanoid_dance' does not fit"),
+        ({"gait": "humanoid_moonwalk"}, "env.gait 'humanoid_moonwalk' does not fit"),
     ]
     for env, message in bad:
         with pytest.raises(ValidationError, match=message):

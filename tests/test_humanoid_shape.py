@@ -1,5 +1,6 @@
 """The DeepMimic humanoid with the [WL19] Fig. 2 shape parameterization: leg length, arm
-length, height and thickness."""
+length, height and thickness (a, c), each leg's length (b), the upper and the lower body's
+thickness (d)."""
 
 import mujoco
 import numpy as np
@@ -60,12 +61,46 @@ def test_masses_follow_the_shapes_volumes():
     assert _mass(legs, "chest") == pytest.approx(14.0)
 
 
+def test_each_leg_has_its_own_length_on_top_of_both():
+    """Fig. 2b: left x right leg; MuJoCo's kinematics put the knee and ankle where the scaled
+    segments say, and the reward normalization sees the asymmetry ([WL19] Table 1)."""
+    from paramimic.envs.reward_normalization import reward_scales
+
+    base, a0 = _anchors(None)
+    c, a1 = _anchors({"leg_length": 1.2, "left_leg_length": 1.1, "right_leg_length": 0.9})
+    for side, scale in (("left", 1.2 * 1.1), ("right", 1.2 * 0.9)):
+        for upper, lower in ((f"{side}_hip", f"{side}_knee"), (f"{side}_knee", f"{side}_ankle")):
+            length0 = np.linalg.norm(a0(upper) - a0(lower))
+            assert np.linalg.norm(a1(upper) - a1(lower)) == pytest.approx(scale * length0)
+    right, left = c.leg_lengths
+    assert (right, left) == pytest.approx((1.08 * base.leg_lengths[0], 1.32 * base.leg_lengths[1]))
+    assert c.hip_height == pytest.approx(1.2 * (base.hip_height - 0.05) + 0.05)  # the mean leg
+    scales = reward_scales(c.leg_lengths, base.leg_lengths, c.mass, base.mass)
+    # l_µ / l⁰_µ = 1.2; 1 - l_σ/l_µ = 1 - 0.12/1.2 (the population std of 1.08 and 1.32 x l0)
+    assert scales.velocity == pytest.approx(1.2 * 0.9) and scales.direction == pytest.approx(0.9)
+
+
+def test_upper_and_lower_body_thickness_apart():
+    """Fig. 2d: the lower body (pelvis and legs) and the upper body (chest, neck, arms) thicken
+    on their own; lengths do not change, masses follow the volumes."""
+    base, a0 = _anchors(None)
+    c, a1 = _anchors({"upper_thickness": 1.5, "lower_thickness": 0.5})
+    assert _mass(c, "root") == pytest.approx(6.0 * 0.5**3)  # the pelvis: a sphere
+    assert _mass(c, "chest") == pytest.approx(_mass(base, "chest") * 1.5**3)  # a sphere
+    thigh, upper_arm = c.model.geom("left_hip"), c.model.geom("left_shoulder")
+    assert thigh.size[0] == pytest.approx(0.5 * base.model.geom("left_hip").size[0])
+    assert upper_arm.size[0] == pytest.approx(1.5 * base.model.geom("left_shoulder").size[0])
+    for body in ("left_knee", "left_ankle", "right_elbow", "neck"):
+        assert a1(body) == pytest.approx(a0(body))
+
+
 @pytest.mark.parametrize(
     "shape",
     [
         {"leg_length": 0.5, "arm_length": 0.5, "height": 0.75, "thickness": 0.5},
         {"leg_length": 2.0, "arm_length": 1.5, "height": 1.5, "thickness": 1.5},
         {"leg_length": 1.5, "arm_length": 1.0, "height": 1.0, "thickness": 0.7},
+        {"left_leg_length": 1.1, "right_leg_length": 0.9, "upper_thickness": 1.5},
     ],
 )
 def test_shaped_humanoid_stands_in_the_clip_pose_with_feet_on_the_ground(shape):

@@ -40,14 +40,21 @@ KP |= {"shoulder": 400.0, "elbow": 300.0}
 AXES = "xyz"
 EULER = "XYZ"
 # [WL19] §5.1, Fig. 2: legs up to 2x longer or shorter, arms 1.5x longer or 2x shorter, height
-# 0.75-1.5x, every body 0.5-1.5x thicker
+# 0.75-1.5x, every body 0.5-1.5x thicker (a); each leg on its own (b, the paper's ±10 % inside a
+# wider range); the upper and the lower body thicker or thinner on their own (d). Each side's and
+# each half's scale multiplies the whole's (left leg: leg_length x left_leg_length).
 SHAPE_PARAMS = (
     ShapeParam("leg_length", 0.5, 2.0, "thigh and shin length"),
     ShapeParam("arm_length", 0.5, 1.5, "upper and lower arm length"),
     ShapeParam("height", 0.75, 1.5, "every length and width"),
     ShapeParam("thickness", 0.5, 1.5, "every width (capsule and sphere radii, box width)"),
+    ShapeParam("left_leg_length", 0.5, 1.5, "the left thigh and shin, times leg_length"),
+    ShapeParam("right_leg_length", 0.5, 1.5, "the right thigh and shin, times leg_length"),
+    ShapeParam("upper_thickness", 0.5, 1.5, "widths above the pelvis (chest, neck, arms)"),
+    ShapeParam("lower_thickness", 0.5, 1.5, "widths of the pelvis and the legs"),
 )
 LEG, ARM = ("hip", "knee"), ("shoulder", "elbow")
+SIDES = ("right", "left")
 BASE_LEG = (
     0.421546 + 0.40987
 )  # thigh + shin of the file  # intrinsic: the x hinge first, then y in the rotated frame, then z
@@ -77,13 +84,22 @@ class HumanoidDef:
 
     @staticmethod
     def limb_scale(name: str, shape: dict[str, float]) -> float:
-        """Length scale along a body's own limb axis: height x leg or arm length."""
+        """Length scale along a body's own limb axis: height x leg (x that side's) or arm
+        length."""
         limb = 1.0
         if name.endswith(LEG):
-            limb = shape["leg_length"]
+            limb = shape["leg_length"] * shape[f"{name.split('_')[0]}_leg_length"]
         elif name.endswith(ARM):
             limb = shape["arm_length"]
         return shape["height"] * limb
+
+    @staticmethod
+    def width_scale(name: str, shape: dict[str, float]) -> float:
+        """Width scale of a body: height x thickness x its half's (the pelvis and the legs are
+        the lower body)."""
+        lower = name == "root" or name.endswith(LEG + ("ankle",))
+        half = shape["lower_thickness" if lower else "upper_thickness"]
+        return shape["height"] * shape["thickness"] * half
 
     @cached_property
     def description(self) -> dict:
@@ -130,14 +146,15 @@ class HumanoidDef:
             attach = np.array([j["AttachX"], j["AttachY"], j["AttachZ"]])
             bodies[j["Name"]] = (attach * along).tolist()
             length = self.limb_scale(j["Name"], shape)
-            width = shape["height"] * shape["thickness"]
+            width = self.width_scale(j["Name"], shape)
             b = _scaled_shape(shapes[j["Name"]], length, width, shape["height"])
             geoms[j["Name"]], corners = _shape_dims(b)
             sites |= corners
             if j["Name"] in self.end_effectors:
                 sites[f"{j['Name']}_end"] = [b["AttachX"], b["AttachY"], 0.0]
-        legs = np.full(2, BASE_LEG * shape["height"] * shape["leg_length"])
-        hip_height = float(legs[0] + 0.05 * shape["height"])
+        # (right, left), the skeleton's order; the root path scales with the mean hip height
+        legs = np.array([BASE_LEG * self.limb_scale(f"{side}_hip", shape) for side in SIDES])
+        hip_height = float(legs.mean() + 0.05 * shape["height"])
         return Dims(bodies, geoms, sites, legs, hip_height, {})
 
     def compile(self, shape: dict[str, float] | None = None) -> Body:
@@ -267,15 +284,17 @@ def _shape_dims(b: dict) -> tuple[dict, dict[str, list[float]]]:
 HUMANOID = HumanoidDef()
 
 
-CLIPS = ("walk", "run", "jump", "backflip", "cartwheel")  # shipped in data/deepmimic
+# shipped in data/deepmimic: clip name -> DeepMimic's file (humanoid3d_<file>.txt)
+CLIPS = {name: name for name in ("walk", "run", "jump", "backflip", "cartwheel")}
+CLIPS["dance"] = "dance_b"  # in place, looping: [WL19] Fig. 2c
 
 
 def humanoid_clip(name: str) -> Clip:
-    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel."""
-    path = DATA / f"humanoid3d_{name}.txt"
-    if not path.is_file():
-        raise KeyError(f"no humanoid clip {name!r}; shipped: walk, run, jump, backflip, cartwheel")
-    return load_deepmimic(path, name=f"humanoid_{name}")
+    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel,
+    dance."""
+    if name not in CLIPS:
+        raise KeyError(f"no humanoid clip {name!r}; shipped: {', '.join(CLIPS)}")
+    return load_deepmimic(DATA / f"humanoid3d_{CLIPS[name]}.txt", name=f"humanoid_{name}")
 
 
 HUMANOID_REGISTRATION = Registration(
