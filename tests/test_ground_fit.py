@@ -144,3 +144,25 @@ def test_fit_is_bit_identical_whatever_the_process_blas_threads():
     with threadpool_limits(limits=2, user_api="blas"):
         two = postures()
     assert one.tobytes() == two.tobytes()
+
+
+def test_a_shaped_humanoid_on_its_clip_gait_starts_on_the_base_bodys_contacts():
+    """[WL19] Eq. 1 at reset for the humanoid on the mocap walk: the contact points the base body
+    has on the ground in the same pose are on the ground on each shaped body (5 mm), none below."""
+    from paramimic.config import EnvConfig
+
+    d = get_character("humanoid")
+    rng = np.random.default_rng(2)
+    config = EnvConfig(gait="humanoid_walk", physics_hz=300, init_noise=0.0)
+    for _ in range(4):
+        shape = {
+            p.name: float(rng.uniform(max(p.low, 0.7), min(p.high, 1.3))) for p in d.shape_params
+        }
+        env = ParamEnv("humanoid", {k: (v, v) for k, v in shape.items()}, config)
+        env.reset(seed=0)
+        targets = env._base_data.site_xpos[env._base.contact_site_ids]
+        on_ground = targets[:, 2] < 2e-3
+        assert on_ground.sum() >= 1  # a heel at this phase
+        points = env.data.site_xpos[env.character.contact_site_ids]
+        assert np.abs(points[on_ground, 2]).max() < 5e-3, shape
+        assert points[:, 2].min() > -5e-3, shape

@@ -157,8 +157,12 @@ def _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter)
         [model.jnt_dofadr[height_joint] + (2 if free else 0), *model.jnt_dofadr[joints]]
     )
     problem = _Problem(model, data, q0, targets, sites, qadr, dofs, weight)
+    # a joint's range bounds it only where the joint is limited (an unlimited hinge's range is
+    # [0, 0]: the humanoid's ball joints, three hinges each)
+    limited = model.jnt_limited[joints].astype(bool)
     ranges = model.jnt_range[joints]
-    bounds = [(None, None), *[(lo, hi) for lo, hi in ranges]]
+    bounds = [(None, None), *[(lo, hi) if on else (None, None)
+                              for (lo, hi), on in zip(ranges, limited, strict=True)]]  # fmt: skip
     x0 = np.clip(
         problem.x0(),
         [b[0] if b[0] is not None else -np.inf for b in bounds],
