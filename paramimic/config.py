@@ -582,9 +582,9 @@ class ExperimentConfig(Section):
     )
     shape_space: Literal["task", "full"] = Field(
         "task",
-        description="'full' adds every shape parameter of the character at its documented range "
-        "(b_g 0.5-1.5, b_l 0.7-1.2 for the [WL19] §5.3 characters) to the task space; "
-        "entries in `task` override single ranges",
+        description="'full' adds the character's documented shape family at its ranges "
+        "(b_g 0.5-1.5, b_l 0.7-1.2 for the [WL19] §5.3 characters; the humanoid's Fig. 2a/c "
+        "parameters) to the task space; entries in `task` override single ranges or add more",
     )
     shape_scale: float = Field(
         1.0,
@@ -653,7 +653,7 @@ class ExperimentConfig(Section):
             if env.get("frame_skip") is None:
                 data["env"] = env | {"physics_hz": registration.physics_hz}
         if data.get("shape_space") == "full" and isinstance(data.get("task", {}), dict):
-            if not registration.character.shape_params:
+            if not registration.shape_ranges():
                 raise ValueError(f"shape_space: {registration.name!r} has no shape parameters")
             s = data.get("shape_scale", 1.0)
             if isinstance(s, int | float) and 0 <= s <= 1:

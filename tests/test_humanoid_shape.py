@@ -125,3 +125,20 @@ def test_shaped_humanoid_stands_in_the_clip_pose_with_feet_on_the_ground(shape):
         assert not terminated
     assert d.xpos[c.root_body_id, 2] == pytest.approx(height, rel=0.1)
     assert np.all(np.isfinite(d.qpos))
+
+
+def test_the_full_shape_space_is_the_documented_family():
+    """`shape_space: full` is Fig. 2a/c's four parameters (what the shipped controller and saved
+    runs were trained with); the per-leg and per-half ones are named in `task` to vary."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.training.method import method_for
+
+    full = {"character": "humanoid", "shape_space": "full", "env": {"gait": "humanoid_walk"}}
+    cfg = ExperimentConfig.model_validate(full)
+    assert list(cfg.task) == ["leg_length", "arm_length", "height", "thickness"]
+    legs = ExperimentConfig.model_validate(
+        full | {"task": {"left_leg_length": [0.9, 1.1], "right_leg_length": [0.9, 1.1]}}
+    )
+    assert legs.task["left_leg_length"] == (0.9, 1.1) and len(legs.task) == 6
+    obs = method_for(legs).spaces.obs_dim - method_for(cfg).spaces.obs_dim
+    assert obs == 2  # the two leg lengths observed

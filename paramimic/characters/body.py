@@ -61,6 +61,9 @@ class ShapeParam:
     low: float
     high: float
     doc: str
+    # part of `shape_space: full` (the documented family); False for a refinement that multiplies
+    # another parameter (the humanoid's per-leg lengths), named in `task` to vary it
+    in_full: bool = True
 
 
 @dataclass(frozen=True)

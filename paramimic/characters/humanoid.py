@@ -39,19 +39,20 @@ KP = {"chest": 1000.0, "neck": 100.0, "hip": 500.0, "knee": 500.0, "ankle": 400.
 KP |= {"shoulder": 400.0, "elbow": 300.0}
 AXES = "xyz"
 EULER = "XYZ"
-# [WL19] §5.1, Fig. 2: legs up to 2x longer or shorter, arms 1.5x longer or 2x shorter, height
-# 0.75-1.5x, every body 0.5-1.5x thicker (a); each leg on its own (b, the paper's ±10 % inside a
-# wider range); the upper and the lower body thicker or thinner on their own (d). Each side's and
-# each half's scale multiplies the whole's (left leg: leg_length x left_leg_length).
+# [WL19] §5.1, Fig. 2: legs up to 2x longer or shorter, arms 1.5x longer or 2x shorter (a),
+# height 0.75-1.5x, every body 0.5-1.5x thicker (c): the family of `shape_space: full`. Each leg
+# on its own (b, the paper's ±10 % inside a wider range) and the upper and the lower body's
+# thickness on their own (d) multiply those (left leg: leg_length x left_leg_length); a config
+# names them in `task` to vary them.
 SHAPE_PARAMS = (
     ShapeParam("leg_length", 0.5, 2.0, "thigh and shin length"),
     ShapeParam("arm_length", 0.5, 1.5, "upper and lower arm length"),
     ShapeParam("height", 0.75, 1.5, "every length and width"),
     ShapeParam("thickness", 0.5, 1.5, "every width (capsule and sphere radii, box width)"),
-    ShapeParam("left_leg_length", 0.5, 1.5, "the left thigh and shin, times leg_length"),
-    ShapeParam("right_leg_length", 0.5, 1.5, "the right thigh and shin, times leg_length"),
-    ShapeParam("upper_thickness", 0.5, 1.5, "widths above the pelvis (chest, neck, arms)"),
-    ShapeParam("lower_thickness", 0.5, 1.5, "widths of the pelvis and the legs"),
+    ShapeParam("left_leg_length", 0.5, 1.5, "the left thigh and shin, x leg_length", False),
+    ShapeParam("right_leg_length", 0.5, 1.5, "the right thigh and shin, x leg_length", False),
+    ShapeParam("upper_thickness", 0.5, 1.5, "widths above the pelvis, x thickness", False),
+    ShapeParam("lower_thickness", 0.5, 1.5, "widths of the pelvis and legs, x thickness", False),
 )
 LEG, ARM = ("hip", "knee"), ("shoulder", "elbow")
 SIDES = ("right", "left")

@@ -113,11 +113,12 @@ class Registration:
         return self.clip_file(path)
 
     def shape_ranges(self, scale: float = 1.0) -> dict[str, tuple[float, float]]:
-        """Every documented shape range shrunk toward the base body by `scale`:
-        [1 - s(1 - lo), 1 + s(hi - 1)] (1: as documented; 0: the base body alone)."""
+        """The documented family's shape ranges (`shape_space: full`) shrunk toward the base body
+        by `scale`: [1 - s(1 - lo), 1 + s(hi - 1)] (1: as documented; 0: the base body alone)."""
         return {
             p.name: (1 - scale * (1 - p.low), 1 + scale * (p.high - 1))
             for p in self.character.shape_params
+            if p.in_full
         }
 
     @property
