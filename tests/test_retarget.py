@@ -9,7 +9,7 @@ from paramimic.characters import get_character
 from paramimic.characters.articulated import BIPED_LOWER_GAIT, QUADRUPED_GAIT
 from paramimic.characters.legs import leg_chains
 from paramimic.characters.planar import WALKER_GAIT
-from paramimic.config import ExperimentConfig
+from paramimic.config import EnvConfig, ExperimentConfig
 from paramimic.envs import env_for, make_env
 from paramimic.motion.retarget import (
     RetargetedGait,
@@ -115,9 +115,8 @@ def test_the_env_imitates_the_retargeted_gait_and_refuses_characters_without_leg
         return float(np.mean(bells))
 
     assert pose_bell(env) > 2.0 * pose_bell(plain)
-    for character in ("fish", "humanoid"):  # no legs to retarget
-        with pytest.raises(ValueError, match="env.retarget"):
-            ExperimentConfig.model_validate({"character": character, "env": {"retarget": True}})
+    with pytest.raises(ValueError, match="env.retarget"):  # no legs to retarget
+        ExperimentConfig.model_validate({"character": "fish", "env": {"retarget": True}})
 
 
 def test_a_shape_change_on_the_fly_retargets_the_reference():
@@ -229,3 +228,39 @@ def test_a_3d_env_imitates_its_retargeted_gait():
                     bent += 1
             np.testing.assert_allclose(got, want, atol=2e-3)
     assert bent > 0 and overextended > 0
+
+
+def _feet_over_a_cycle(env) -> np.ndarray:
+    """The lowest contact point of each foot [40, 2] (right, left) over one cycle of the env's
+    reference gait on its body, from MuJoCo's kinematics."""
+    c, g = env.character, env._gait
+    data = mujoco.MjData(c.model)
+    feet = [[c.model.site(f"{f}_c{i}").id for i in range(4)] for f in ("right_ankle", "left_ankle")]
+    out = []
+    for phi in np.linspace(0.0, 1.0, 40, endpoint=False):
+        data.qpos[:] = 0.0
+        data.qpos[2] = g.root_height(phi)
+        data.qpos[3:7] = g.root_rotation(phi).as_quat(scalar_first=True)
+        data.qpos[c.qpos_idx] = g.pose(phi)
+        mujoco.mj_kinematics(c.model, data)
+        out.append([data.site_xpos[f, 2].min() for f in feet])
+    return np.array(out)
+
+
+def test_the_humanoid_clip_gait_retargeted_keeps_both_feet_on_the_ground():
+    """[WL19] Fig. 2b on the mocap walk: legs 1.1x and 0.9x. The clip's angles put the long
+    leg's foot 8 cm into the floor and leave the short one's 7 cm above it; retargeted, each
+    foot follows the base foot's path (the shortest leg's scale), as on the base body."""
+    from paramimic.envs import ParamEnv
+
+    gait = EnvConfig(gait="humanoid_walk", physics_hz=300)
+    legs = {"left_leg_length": (1.1, 1.1), "right_leg_length": (0.9, 0.9)}
+    base = _feet_over_a_cycle(ParamEnv("humanoid", {}, gait))
+    plain = _feet_over_a_cycle(ParamEnv("humanoid", legs, gait))
+    retargeted = ParamEnv("humanoid", legs, gait.model_copy(update={"retarget": True}))
+    fixed = _feet_over_a_cycle(retargeted)
+    assert plain[:, 1].min() < -0.05 and plain[:, 0].min() > 0.05  # sunk and floating
+    assert fixed.min(axis=0) == pytest.approx(base.min(axis=0), abs=0.01)
+    assert fixed.min(axis=1).max() < 0.01  # a foot on the ground all through the cycle
+    left = retargeted._gait.joints.index("left_knee")
+    assert (retargeted._gait.pose(np.linspace(0, 1, 20))[:, left] <= 0).all()  # knees bend back

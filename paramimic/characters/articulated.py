@@ -21,6 +21,7 @@ import numpy as np
 
 from paramimic.characters.body import (
     DENSITY,
+    PLANAR_AXIS,
     Body,
     Joint,
     ShapeParam,
@@ -99,6 +100,11 @@ class BodyPlan:
                 ShapeParam(f"{p.name}_{a}", *LOCAL_RANGE, f"b_l: {p.name} along {a}") for a in AXES
             ]
         return tuple(out)
+
+    def sagittal_hinge(self, part: str) -> Joint:
+        """The hinge of a leg part about the pitch axis (what the retargeting bends)."""
+        joints = next(p for p in self.parts if p.name == part).joints
+        return next(j for j in joints if j.axis == PLANAR_AXIS)
 
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.shape_params)

@@ -55,7 +55,7 @@ SHAPE_PARAMS = (
     ShapeParam("lower_thickness", 0.5, 1.5, "widths of the pelvis and legs, x thickness", False),
 )
 LEG, ARM = ("hip", "knee"), ("shoulder", "elbow")
-SIDES = ("right", "left")
+SIDES = ("right", "left")  # the skeleton's order
 BASE_LEG = (
     0.421546 + 0.40987
 )  # thigh + shin of the file  # intrinsic: the x hinge first, then y in the rotated frame, then z
@@ -73,9 +73,12 @@ class HumanoidDef:
     shape_params: tuple[ShapeParam, ...] = SHAPE_PARAMS
     planar: bool = False  # a free root
     swims: bool = False
-    # the leg chains the sagittal retargeting bends (`paramimic/motion/retarget.py`): none, its
-    # legs are ball-jointed hips and 1-DOF knees that the planar two-link map does not cover
-    legs: tuple[tuple[str, ...], ...] = ()
+    # the leg chains the sagittal retargeting bends (`paramimic/motion/retarget.py`): each hip's
+    # and ankle's last Euler hinge (z, after x and y) and the knee lie in the thigh's sagittal
+    # plane, the thigh and shin hanging along it (the file's offsets are along -y only)
+    legs: tuple[tuple[str, ...], ...] = tuple(
+        (f"{side}_hip", f"{side}_knee", f"{side}_ankle") for side in ("right", "left")
+    )
 
     def param_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.shape_params)
@@ -126,6 +129,11 @@ class HumanoidDef:
                 )
         return tuple(out)
 
+    def sagittal_hinge(self, part: str) -> Joint:
+        """A leg part's hinge in the sagittal plane: the knee's own, a ball joint's z hinge."""
+        names = (part, f"{part}_z")
+        return next(j for j in self.joints if j.name in names)
+
     @cached_property
     def spherical(self) -> tuple[str, ...]:
         return tuple(j["Name"] for j in self.skeleton if j["Type"] == "spherical")
@@ -156,7 +164,14 @@ class HumanoidDef:
         # (right, left), the skeleton's order; the root path scales with the mean hip height
         legs = np.array([BASE_LEG * self.limb_scale(f"{side}_hip", shape) for side in SIDES])
         hip_height = float(legs.mean() + 0.05 * shape["height"])
-        return Dims(bodies, geoms, sites, legs, hip_height, {})
+        # joint to joint along each leg (the retargeting's thigh and shin)
+        lengths = {}
+        for j in self.skeleton:
+            if j["Name"].endswith(("knee", "ankle")):
+                lengths[self.skeleton[j["Parent"]]["Name"]] = float(
+                    np.linalg.norm(bodies[j["Name"]])
+                )
+        return Dims(bodies, geoms, sites, legs, hip_height, lengths)
 
     def compile(self, shape: dict[str, float] | None = None) -> Body:
         shape = shape_with_defaults(self, shape)

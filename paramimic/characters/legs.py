@@ -3,7 +3,6 @@ what `paramimic.motion.retarget` retargets."""
 
 from __future__ import annotations
 
-from paramimic.characters.body import PLANAR_AXIS
 from paramimic.motion.retarget import PlanarLeg
 
 
@@ -13,7 +12,8 @@ def leg_chains(
     """The legs of a character as `PlanarLeg`s with the body's segment `lengths` (joint to
     joint) and the base body's `base`: a planar character's (thigh, shin) segments, the foot
     being the segment whose parent is the shin; a 3D character's (thigh, shin, foot) parts,
-    their hinges about the pitch axis. Raises ValueError for a character without legs."""
+    their hinges in the sagittal plane (`definition.sagittal_hinge(part)`). Raises ValueError
+    for a character without legs."""
     joints = [j.name for j in definition.joints]
     chains = []  # (thigh, shin, (hip, knee, ankle) hinges)
     if definition.planar:
@@ -21,12 +21,8 @@ def leg_chains(
         for thigh, shin in definition.legs:
             foot = next(s for s in definition.segments if s.parent == shin)
             chains.append((thigh, shin, (segments[thigh].joint, segments[shin].joint, foot.joint)))
-    elif definition.legs:
-        parts = {p.name: p for p in definition.parts}
-
-        def pitch(part: str):
-            return next(j for j in parts[part].joints if j.axis == PLANAR_AXIS)
-
+    elif definition.legs:  # a 3D character names its parts' sagittal hinges
+        pitch = definition.sagittal_hinge
         for thigh, shin, foot in definition.legs:
             chains.append((thigh, shin, (pitch(thigh), pitch(shin), pitch(foot))))
     if not chains:

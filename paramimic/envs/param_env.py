@@ -39,7 +39,7 @@ from paramimic.envs.rewards import (
 from paramimic.messages import StepInfo
 from paramimic.motion.clip_gait import ClipGait
 from paramimic.motion.phase import PhaseSampler
-from paramimic.motion.retarget import RetargetedGait
+from paramimic.motion.retarget import RetargetedGait, retarget_pose
 
 CLIP_GAITS = 32  # clip gait tables kept per env, as `compiled_body` keeps 32 bodies
 REFERENCE_SAMPLES = 64  # phases at which end-effector reference positions are tabulated
@@ -128,28 +128,48 @@ class ParamEnv(EnvCore):
             if self.config.reward.normalize
             else RewardScales.identity()
         )
-        if self.motion is not None and self.config.retarget:
-            legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
-            self.motion = RetargetedGait(self._gait, legs)
         if self._clip is not None:
             self._gait = self._clip_gait(body)
             self.motion = self._gait if self.config.imitation else None
             self._index_fall_geoms()
+        elif self.motion is not None and self.config.retarget:
+            legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
+            self.motion = RetargetedGait(self._gait, legs)
         self._reference = self._tabulate_reference() if self.motion is not None else None
 
     def _clip_gait(self, body: Body) -> ClipGait:
-        """The clip gait on `body` (its root path scaled by the body's hip height), cached for the
-        last `CLIP_GAITS` bodies (a family draws a new body at nearly every reset)."""
+        """The clip gait on `body` (its root path scaled by the body's hip height; with
+        `env.retarget`, each leg on the base leg's hip-to-ankle path scaled by the shortest
+        leg, and the root path by that scale), cached for the last `CLIP_GAITS` bodies (a
+        family draws a new body at nearly every reset)."""
         key = tuple(sorted(body.shape.items()))
         gait = self._clip_gaits.pop(key, None)
         if gait is None:
             joints = tuple(j.name for j in self.definition.joints)
             to_qpos = lambda pose: self.definition.pose_qpos(body, pose)  # noqa: E731
+            if self.config.retarget:
+                to_qpos = self._retargeted(body, to_qpos)
             gait = ClipGait.from_clip(self._clip, joints, to_qpos, body.qpos_idx)
         self._clip_gaits[key] = gait
         while len(self._clip_gaits) > CLIP_GAITS:
             self._clip_gaits.popitem(last=False)
         return gait
+
+    def _retargeted(self, body: Body, to_qpos):
+        """`to_qpos` of a clip on `body` with its legs retargeted (`retarget_pose`)."""
+        base = self._base
+        legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
+        scale = min(leg.scale for leg in legs)
+        root = scale * base.hip_height / body.hip_height  # pose_qpos scaled it by the hip height
+        idx = np.asarray(body.qpos_idx)
+
+        def retargeted(pose) -> np.ndarray:
+            qpos = to_qpos(pose)
+            qpos[:, :3] *= root
+            qpos[:, idx] = retarget_pose(qpos[:, idx], legs, scale)
+            return qpos
+
+        return retargeted
 
     def _tabulate_reference(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Reference pose, joint velocity and end-effectors (root frame) over one cycle.
