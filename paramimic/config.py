@@ -552,9 +552,10 @@ class TrainConfig(Section):
     run_dir: Path | None = Field(None, description="default: runs/<config name>")
     init_from: Path | None = Field(
         None,
-        description="warm start: the policy, value and normalizer of this checkpoint (a run dir "
-        "or .pt) of the same env layout, e.g. the base body's controller for its family; inputs "
-        "constant there that vary here (fixed task dims) start ignored (`adopt_controller`)",
+        description="warm start: the policy, value and normalizer of this checkpoint (a run dir, "
+        "a .pt or a shipped controller's name) of the same character and env, e.g. the base "
+        "body's controller for its family; its task dims in the same order, more may follow; "
+        "inputs constant there that vary here, and added ones, start ignored (`adopt_controller`)",
     )
     torch_threads: int | Literal["auto"] = Field(
         "auto",

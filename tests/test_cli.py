@@ -98,7 +98,7 @@ def test_a_family_trains_from_its_base_stage_with_init_from(tmp_path):
     # a source that is not there fails before anything starts, naming the field
     res = _cli("train", family_cfg, "--serial", "--run-dir", family, "--init-from", tmp_path / "x")
     assert res.returncode == 2, res.stdout + res.stderr
-    assert "train.init_from" in res.stdout and "no checkpoint or run directory" in res.stdout
+    assert "train.init_from: no checkpoint, run directory or shipped controller" in res.stdout
     assert not family.exists()
     for cfg, run, more in ((base_cfg, base, ()), (family_cfg, family, ("--init-from", base))):
         res = _cli("train", cfg, "--serial", "--run-dir", run, *more)

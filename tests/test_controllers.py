@@ -35,7 +35,7 @@ def test_a_run_ships_as_a_controller_that_eval_takes_by_name(tmp_path):
         assert path.stat().st_size < full.stat().st_size / 2  # no optimizer, no sampler state
         state = checkpoint.read(path)  # plain data: loads with weights_only
         assert set(state) == {"config", "obs_dim", "act_dim", "marginal", "progress", "learner"}
-        assert set(state["learner"]) == {"policy"}
+        assert set(state["learner"]) == {"policy", "normalizer"}  # no optimizers
         torch.load(path, weights_only=True)
         res = _cli("controllers", "list")
         assert name in res.stdout and "humanoid_walk" in res.stdout

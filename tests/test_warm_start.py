@@ -119,7 +119,7 @@ def test_an_edge_judged_family_tests_its_mean_action_at_the_edge_every_few_itera
 
 def test_a_missing_source_fails_in_the_preflight_not_when_a_saved_config_is_read(tmp_path):
     cfg = _config(tmp_path, "family", (0.7, 1.3), init_from=str(tmp_path / "nowhere"))
-    with pytest.raises(PreflightError, match="train.init_from: no checkpoint or run directory"):
+    with pytest.raises(PreflightError, match="init_from: no checkpoint, run directory or shipped"):
         preflight(cfg)
     (tmp_path / "empty").mkdir()
     with pytest.raises(PreflightError, match="train.init_from: no checkpoint at"):
@@ -155,3 +155,32 @@ def test_evaluate_config_runs_the_configs_env_task_space_and_horizon(tmp_path):
         "right_leg_length",
     ]
     assert 0 < report["mean_return"] <= 15  # at most 15 steps of reward ≤ 1 in 0.5 s
+
+
+def test_a_family_that_varies_more_than_its_base_starts_from_the_shipped_controller(tmp_path):
+    """[WL19] Fig. 2b from the shipped humanoid_walk controller (`init_from: humanoid_walk`, a
+    name): the family observes two task dims the controller never saw (each leg's length),
+    inserted after its four; they start ignored, so on the base body the family's policy acts
+    as the controller does, and the preflight finds the controller by name."""
+    from paramimic.training import checkpoint
+
+    source = checkpoint.load("humanoid_walk")
+    base = ExperimentConfig.model_validate(source["config"])
+    legs = {"left_leg_length": (0.9, 1.1), "right_leg_length": (0.9, 1.1)}
+    family = base.model_copy(update={
+        "task": dict(base.task) | legs,
+        "train": base.train.model_copy(update={"init_from": "humanoid_walk", "torch_threads": 1}),
+    })  # fmt: skip
+    preflight(family)
+    trainer = Trainer(family, tmp_path / "family")
+    assert trainer.obs_dim == source["obs_dim"] + 2
+    env = env_for(family)
+    obs, _ = env.reset(seed=3, options={"task": [1.0] * 6})
+    controller = Trainer(base.model_copy(update={"train": family.train.model_copy(
+        update={"init_from": None})}), tmp_path / "base")  # fmt: skip
+    controller.learner.policy.load_state_dict(source["learner"]["policy"])
+    theirs = np.delete(obs, [4, 5])
+    with torch.no_grad():
+        mine = trainer.learner.policy(torch.as_tensor(obs[None]))[0].numpy()
+        want = controller.learner.policy(torch.as_tensor(theirs[None]))[0].numpy()
+    np.testing.assert_allclose(mine, want, rtol=1e-5, atol=1e-6)

@@ -217,19 +217,58 @@ class PPOLearner:
 CONSTANT = 1e-10  # an observation variance this small: the input never changed
 
 
-def adopt_controller(learner: PPOLearner, source: dict, observations: np.ndarray) -> np.ndarray:
-    """Warm start from `source`, a `PPOLearner.state_dict()` of the same observation and action
-    layout: its π, V and normalizer. Inputs that were constant in the source's experience
-    (normalizer variance ≈ 0: task dims it trained with fixed, and what follows from them, such
-    as a body's own target speed) but vary in `observations` (resets of the new task space)
-    start ignored: their first-layer weights in π and V are zeroed, so every new task first
-    gets the source's actions and values, and their normalizer statistics become those of
+def adopt_controller(
+    learner: PPOLearner,
+    source: dict,
+    observations: np.ndarray,
+    inserted: np.ndarray | None = None,
+    source_observations: np.ndarray | None = None,
+) -> np.ndarray:
+    """Warm start from `source`, a `PPOLearner.state_dict()` (or a shipped controller's, with
+    the policy only) of the same observation layout but for the inputs `inserted` (indices in
+    this learner's observation that the source has not: task dims it did not observe): its π,
+    V and normalizer. Inputs that were constant in the source's experience (normalizer variance
+    ≈ 0; for a controller without its normalizer's statistics, constant over
+    `source_observations`, resets of the source's own config: task dims it trained with fixed,
+    and what follows from them, such as a body's own target speed)
+    but vary in `observations` (resets of the new task space), and the inserted ones, start
+    ignored: their first-layer weights in π and V are zero, so every new task first gets the
+    source's actions and values, and their normalizer statistics become those of
     `observations`, so they enter as well-scaled inputs instead of a constant's z-scores
     clipped at ±obs_clip. Returns those input indices."""
-    learner.policy.load_state_dict(source["policy"])
-    learner.normalizer.load_state_dict(source["normalizer"])
+    obs_dim = observations.shape[1]
+    inserted = np.asarray([] if inserted is None else inserted, dtype=int)
+    kept = np.setdiff1d(np.arange(obs_dim), inserted)
+    policy = {k: v.clone() for k, v in source["policy"].items()}
+    if len(inserted):  # widen the first layers and the normalization buffers
+        for key in ("pi.0.weight", "v.0.weight"):
+            w = policy[key]
+            policy[key] = w.new_zeros((w.shape[0], obs_dim))
+            policy[key][:, torch.from_numpy(kept)] = w
+        for key, fill in (("obs_mean", 0.0), ("obs_std", 1.0)):
+            old = policy[key]
+            policy[key] = old.new_full((obs_dim,), fill)
+            policy[key][torch.from_numpy(kept)] = old
+    learner.policy.load_state_dict(policy)
+    stats = source.get("normalizer")
+    mean, var = np.zeros(obs_dim), np.zeros(obs_dim)
+    if stats is not None:
+        mean[kept], var[kept] = stats["mean"], stats["var"]
+        learner.normalizer.count = float(stats["count"])
+        constant = var < CONSTANT
+    else:  # a controller: the policy's normalization; constant where its resets are
+        if source_observations is None:
+            raise ValueError("a source without normalizer statistics needs source_observations")
+        mean[kept] = policy["obs_mean"].double().numpy()[kept]
+        var[kept] = policy["obs_std"].double().numpy()[kept] ** 2
+        learner.normalizer.count = float(len(observations))
+        constant = np.zeros(obs_dim, dtype=bool)
+        constant[kept] = source_observations.var(axis=0) < CONSTANT
     sample_var = observations.var(axis=0)
-    dims = np.flatnonzero((learner.normalizer.var < CONSTANT) & (sample_var > CONSTANT))
+    constant[inserted] = True
+    new = np.isin(np.arange(obs_dim), inserted)
+    dims = np.flatnonzero(constant & ((sample_var > CONSTANT) | new))
+    learner.normalizer.mean, learner.normalizer.var = mean, var
     with torch.no_grad():
         for net in (learner.policy.pi, learner.policy.v):
             net[0].weight[:, torch.from_numpy(dims)] = 0.0

@@ -16,12 +16,14 @@ import pickle
 import tempfile
 import warnings
 import zipfile
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import torch
 
 LATEST = "latest.pt"
+SUFFIX = ".pt"
 TMP_PREFIX = ".tmp-"
 _TORCH_DTYPES = {np.dtype(t) for t in ("bool", "uint8", "int8", "int16", "int32", "int64",
                                        "float16", "float32", "float64")}  # fmt: skip
@@ -131,15 +133,41 @@ def _fsync_dir(d: Path) -> None:
         os.close(fd)
 
 
-def resolve(path: Path) -> Path:
-    """A checkpoint file, or a run directory / checkpoint directory holding latest.pt."""
+def resolve(path: Path | str) -> Path:
+    """A checkpoint file, a run directory / checkpoint directory holding latest.pt, or the name
+    of a shipped controller (a path that exists wins)."""
     path = Path(path)
     if path.is_file():
         return path
     for candidate in (checkpoint_dir(path) / LATEST, path / LATEST):
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"no checkpoint at {path} (looked for {checkpoint_dir(path) / LATEST})")
+    named = None if path.exists() else shipped(str(path))
+    if named is not None:
+        return named
+    raise FileNotFoundError(
+        f"no checkpoint at {path} (looked for {checkpoint_dir(path) / LATEST}; shipped "
+        f"controllers: {', '.join(shipped_names()) or 'none'})"
+    )
+
+
+def shipped_dir() -> Path:
+    """Where the shipped controllers live (inside the installed package): a trained run's
+    policy as a small weights-only file, taken by name (`services/learner/controllers.py`)."""
+    return Path(str(resources.files("paramimic") / "data" / "controllers"))
+
+
+def shipped_names() -> list[str]:
+    folder = shipped_dir()
+    return sorted(p.stem for p in folder.glob(f"*{SUFFIX}")) if folder.is_dir() else []
+
+
+def shipped(name: str) -> Path | None:
+    """The file of the shipped controller `name`, None if there is none."""
+    if not name or "/" in name or name.startswith("."):
+        return None
+    path = shipped_dir() / f"{name}{SUFFIX}"
+    return path if path.is_file() else None
 
 
 def read(file: Path) -> dict:

@@ -78,8 +78,10 @@ def _check_clips(cfg: ExperimentConfig) -> None:
 def _check_source(source: Path | None) -> None:
     if source is None:
         return
-    if not Path(source).exists():
-        raise PreflightError(f"train.init_from: no checkpoint or run directory at {source}")
+    if not Path(source).exists() and checkpoint.shipped(str(source)) is None:
+        raise PreflightError(
+            f"train.init_from: no checkpoint, run directory or shipped controller at {source}"
+        )
     try:
         checkpoint.resolve(Path(source))
     except (FileNotFoundError, checkpoint.CheckpointError) as e:

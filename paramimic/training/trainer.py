@@ -166,20 +166,36 @@ class Trainer:
         self.progress = Progress(**state["progress"])
 
     def warm_start(self, state: dict) -> None:
-        """Start π, V and the normalizer from another run's checkpoint (`train.init_from`) of
-        the same observation and action layout (`adopt_controller`, with 64 resets of this
-        config's env as the new inputs' statistics); optimizers, V̄ and the curriculum start
-        fresh. A frozen std (`ppo.learn_std: false`) is this config's."""
-        if (state["obs_dim"], state["act_dim"]) != (self.obs_dim, self.act_dim):
-            raise ValueError(
-                f"train.init_from: {self.cfg.train.init_from} has observation/action sizes "
-                f"{state['obs_dim']}/{state['act_dim']}, this config's env has "
-                f"{self.obs_dim}/{self.act_dim} (same character, task dims and env needed)"
-            )
-        adopt_controller(self.learner, state["learner"], reset_observations(self.cfg))
+        """Start π, V and the normalizer from another run's checkpoint or a shipped controller
+        (`train.init_from`) of the same character, env and action layout, whose task space is
+        this one's or a part of it in the same order (a family varying more shape parameters
+        than its base controller observed): `adopt_controller`, with 64 resets of this config's
+        env as the new inputs' statistics; optimizers, V̄ and the curriculum start fresh. A
+        frozen std (`ppo.learn_std: false`) is this config's."""
+        inserted = self._inserted_inputs(state)
+        source = None  # a shipped controller keeps no normalizer: its own resets tell
+        if "normalizer" not in state["learner"]:
+            source = reset_observations(ExperimentConfig.model_validate(state["config"]))
+        observations = reset_observations(self.cfg)
+        adopt_controller(self.learner, state["learner"], observations, inserted, source)
         if not self.cfg.ppo.learn_std:
             with torch.no_grad():
                 self.learner.policy.log_std.fill_(self.cfg.ppo.init_log_std)
+
+    def _inserted_inputs(self, state: dict) -> np.ndarray:
+        """The observation indices of this config's task dims the source did not observe."""
+        mine = list(self.cfg.task)
+        theirs = list(state["config"].get("task", {}))
+        new = [i for i, name in enumerate(mine) if name not in theirs]
+        fits = [n for n in mine if n in theirs] == theirs and state["act_dim"] == self.act_dim
+        if not fits or state["obs_dim"] + len(new) != self.obs_dim:
+            raise ValueError(
+                f"train.init_from: {self.cfg.train.init_from} has observation/action sizes "
+                f"{state['obs_dim']}/{state['act_dim']} and task {theirs}; this config's env has "
+                f"{self.obs_dim}/{self.act_dim} and task {mine} (same character and env needed, "
+                "the source's task dims in the same order)"
+            )
+        return np.asarray(new, dtype=int)  # the task opens the observation
 
     def save_checkpoint(self) -> Path:
         keep = self.cfg.train.keep_checkpoints

@@ -14,39 +14,26 @@ from __future__ import annotations
 
 import os
 import tempfile
-from importlib import resources
 from pathlib import Path
 
 import torch
 
 from paramimic.training import checkpoint
+from paramimic.training.checkpoint import shipped as find
+from paramimic.training.checkpoint import shipped_dir as directory
+from paramimic.training.checkpoint import shipped_names as names
 
 KEEP = ("config", "obs_dim", "act_dim", "marginal", "progress")
-SUFFIX = ".pt"
 
-
-def directory() -> Path:
-    """Where the shipped controllers live (inside the installed package)."""
-    return Path(str(resources.files("paramimic") / "data" / "controllers"))
-
-
-def names() -> list[str]:
-    folder = directory()
-    return sorted(p.stem for p in folder.glob(f"*{SUFFIX}")) if folder.is_dir() else []
-
-
-def find(name: str) -> Path | None:
-    """The file of the shipped controller `name`, None if there is none."""
-    if not name or "/" in name or name.startswith("."):
-        return None
-    path = directory() / f"{name}{SUFFIX}"
-    return path if path.is_file() else None
+__all__ = ["add", "controller_state", "directory", "find", "names"]
 
 
 def controller_state(state: dict) -> dict:
     """A checkpoint's state reduced to what playing, rendering and evaluating a policy need."""
     out = {k: state[k] for k in KEEP if k in state}
-    out["learner"] = {"policy": state["learner"]["policy"]}
+    # the normalizer's statistics too: a family warm started from the controller (`init_from`)
+    # tells constant inputs from varying ones by them
+    out["learner"] = {k: state["learner"][k] for k in ("policy", "normalizer")}
     if state["config"].get("env", {}).get("clip") is not None and "curriculum" in state:
         out["curriculum"] = state["curriculum"]
     return out
@@ -59,8 +46,8 @@ def add(run: Path, name: str, folder: Path | None = None) -> Path:
     state = controller_state(checkpoint.load(run))
     folder = folder or directory()
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}{SUFFIX}"
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=SUFFIX)
+    path = folder / f"{name}{checkpoint.SUFFIX}"
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=checkpoint.SUFFIX)
     with os.fdopen(fd, "wb") as f:
         torch.save(checkpoint.encode(state), f)
     os.replace(tmp, path)
