@@ -34,6 +34,7 @@ class EpisodeResult:
     body_error: float | None = None  # clip gaits: mean body position error (m)
     root_drift: float | None = None  # clip gaits: mean distance from the reference root path
     clip_speed: float | None = None  # clip gaits: the clip's speed on this body (m/s)
+    target_speed: float | None = None  # [WL19] gaits: the body's target speed (Table 1, m/s)
 
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
@@ -97,6 +98,7 @@ def run_episodes(
                     s["error"] / s["len"] if bodies else None,
                     s["drift"] / s["len"] if path else None,
                     env.clip_speed if path else None,
+                    getattr(env, "target_speed", None),
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -129,7 +131,22 @@ def summarize(results: list[EpisodeResult]) -> dict:
         }
         | _fitness(results)
         | _tracking(results, speeds)
+        | _on_target(results, speeds)
     )
+
+
+SPEED_TOLERANCE = 0.15  # a body is on target within 15 % of its own target speed
+
+
+def _on_target(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
+    """[WL19] gaits: the forward speed over each body's own target speed (its Table 1
+    normalization), the mean and the share of bodies within SPEED_TOLERANCE of it."""
+    targets = np.array([r.target_speed or 0.0 for r in results])
+    if not results or results[0].target_speed is None or (targets <= 0).any():
+        return {}
+    ratio = speeds / targets
+    within = np.abs(ratio - 1.0) <= SPEED_TOLERANCE
+    return {"speed_over_target": float(ratio.mean()), "on_target_share": float(within.mean())}
 
 
 def _fitness(results: list[EpisodeResult]) -> dict:

@@ -587,6 +587,11 @@ class ParamEnv(EnvCore):
         return self._clip is not None
 
     @property
+    def target_speed(self) -> float:
+        """The target speed on this body (m/s), after [WL19] Table 1's normalization."""
+        return float(self._target_v)
+
+    @property
     def clip_speed(self) -> float | None:
         """A clip gait's speed on this body (m/s; the clip's root path scaled by the body's hip
         height); None for a procedural gait."""
