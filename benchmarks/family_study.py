@@ -519,16 +519,11 @@ def headings(variant: str, seed: int, episodes: int = 20) -> dict:
     between its facing direction and the target direction. Writes
     study_headings_<variant>_s<seed>.json."""
     warnings.filterwarnings("ignore")
-    from paramimic.config import ExperimentConfig
     from paramimic.envs import env_for
     from paramimic.evaluation import deterministic
-    from paramimic.rl.networks import ActorCritic
     from paramimic.training import checkpoint
 
-    state = checkpoint.load(RUNS / f"{variant}_s{seed}")
-    cfg = ExperimentConfig.model_validate(state["config"])
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
-    policy.load_state_dict(state["learner"]["policy"])
+    _, cfg, policy = checkpoint.load_policy(RUNS / f"{variant}_s{seed}")
     act = deterministic(policy)
     env = env_for(cfg, cfg.env.for_evaluation(10.0))
     rows = []

@@ -93,16 +93,9 @@ def training_wall_clock(run: Path) -> float:
 
 def load_run(run: Path):
     """(checkpoint state, config, policy in eval mode) of a run directory or checkpoint."""
-    from paramimic.config import ExperimentConfig
-    from paramimic.rl.networks import ActorCritic
     from paramimic.training import checkpoint
 
-    state = checkpoint.load(run)
-    cfg = ExperimentConfig.model_validate(state["config"])
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
-    policy.load_state_dict(state["learner"]["policy"])
-    policy.eval()
-    return state, cfg, policy
+    return checkpoint.load_policy(run)
 
 
 def evaluate_run(run: Path, episodes: int, seed: int) -> dict:

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from paramimic.config import ConfigError, ExperimentConfig, load_config
+from paramimic.config import ConfigError, load_config
 
 app = typer.Typer(
     add_completion=False,
@@ -243,7 +243,7 @@ def evaluate_cmd(
     )
     report.update(
         {
-            "checkpoint": str(checkpoint.resolve(_run_path(run))),
+            "checkpoint": str(checkpoint.resolve(run)),
             "config": cfg.name,
             "iteration": state["progress"]["iteration"],
             "env_steps": state["progress"]["env_steps"],
@@ -278,28 +278,16 @@ def evaluate_cmd(
         console.print(f"wrote {write_heatmap(report['grid'], heatmap, title)}")
 
 
-def _run_path(run: Path) -> Path:
-    """A run directory or checkpoint as given, or the file of the shipped controller so named."""
-    from services.learner import controllers
-
-    return run if run.exists() else controllers.find(str(run)) or run
-
-
 def _load_policy(run: Path, seconds: float | None = None):
     """(config, policy in eval mode, checkpoint state) of a run directory, a checkpoint or the
     name of a shipped controller (`paramimic controllers list`)."""
-    from paramimic.rl.networks import ActorCritic
     from paramimic.training import checkpoint
 
     try:
-        state = checkpoint.load(_run_path(run))
+        state, cfg, policy = checkpoint.load_policy(run)
     except (FileNotFoundError, checkpoint.CheckpointError) as e:
         _fail(str(e))
-    cfg = ExperimentConfig.model_validate(state["config"])
     cfg.env = cfg.env.for_evaluation(seconds)  # whole episodes: no training-only stall rules
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
-    policy.load_state_dict(state["learner"]["policy"])
-    policy.eval()
     return cfg, policy, state
 
 

@@ -222,3 +222,17 @@ def upgrade(file: Path) -> Path:
     os.replace(tmp, file)  # in place: a run resumes from it
     _fsync_dir(file.parent)
     return file
+
+
+def load_policy(path: Path | str):
+    """(state, config, policy in eval mode) of a run directory, a checkpoint file or a shipped
+    controller's name: the controller a checkpoint holds, ready to act."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.rl.networks import ActorCritic
+
+    state = load(Path(path))
+    cfg = ExperimentConfig.model_validate(state["config"])
+    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy.load_state_dict(state["learner"]["policy"])
+    policy.eval()
+    return state, cfg, policy
