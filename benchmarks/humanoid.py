@@ -112,7 +112,7 @@ def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
         "no_fall": 1.0 - report["fall_percent"] / 100.0 >= no_fall,
         "body_error": report["mean_body_error"] <= error,
         "speed": abs(report["speed_ratio"] - 1.0) <= speed,
-        "budget": budget is None or steps <= budget,
+        "budget": budget is None or steps - cfg.ppo.num_steps < budget,  # its last iteration
     }
     return {
         "config": cfg.name,

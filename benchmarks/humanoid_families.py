@@ -1,0 +1,150 @@
+"""[WL19] Fig. 2's humanoid families: one controller for a family of humanoid bodies, judged on
+bodies the training never drew.
+
+A family run (configs/humanoid_fig2a.yaml ... fig2d.yaml, each warm started from its base
+controller) is evaluated with the deterministic policy on 300 bodies drawn uniformly from its
+task space with a seed no training run uses, 30-s episodes from random phases ([WL19] Table 4
+counts falls within 30 s; a fall is a fall contact, the root, chest or neck on the ground), and
+on a 7 x 7 grid of its two display dims (the per-shape returns of [WL19] Fig. 6, as a heatmap
+PNG). Each body's forward speed is compared with its own target speed, the clip's scaled by
+[WL19] Table 1's normalization of its legs: `speed_over_target` is the mean ratio,
+`on_target_share` the share of bodies within 15 % of theirs.
+
+| family | falls in 30 s | speed | within (env steps of the family run) |
+|---|---|---|---|
+| humanoid_fig2a (legs 0.5-2.0 x arms 0.5-1.5) | <= 10 % | mean within 15 % of the target | 40M |
+| humanoid_fig2b (left x right leg, ±10 %) | <= 5 % | mean within 15 % of the target | 20M |
+| humanoid_fig2c, humanoid_fig2d | measured | measured | |
+
+    python benchmarks/humanoid_families.py eval RUN_DIR [--bodies 300] [--seed 2025]
+    python benchmarks/humanoid_families.py table
+
+Writes benchmarks/results/humanoid_family_<config>_s<seed>_<k steps>k.json and its heatmap
+PNG beside it; `table` writes the results section of docs/humanoid_families.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from tabulate import tabulate
+
+from paramimic.evaluation import SPEED_TOLERANCE, evaluate_config
+from paramimic.training import checkpoint
+from services.media import write_heatmap
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+DOCS = ROOT / "docs" / "humanoid_families.md"
+MARK = ("<!-- results -->", "<!-- /results -->")
+EVAL_SEED = 2025  # never a training seed
+# family -> (falls %, |speed over target - 1|, env steps of the family run); None: measured only
+TARGETS = {
+    "humanoid_fig2a": (10.0, SPEED_TOLERANCE, 40_000_000),
+    "humanoid_fig2b": (5.0, SPEED_TOLERANCE, 20_000_000),
+}
+
+
+def evaluate_family(run: Path, bodies: int, seed: int) -> dict:
+    state, cfg, policy = checkpoint.load_policy(run)
+    if cfg.env.gait is None or not any(hi > lo for lo, hi in cfg.task.values()):
+        raise SystemExit(f"{run}: not a humanoid family on a clip gait (env.gait, a task range)")
+    report = evaluate_config(policy, cfg, bodies, seed, grid_size=7, seconds=30.0)
+    steps = int(state["progress"]["env_steps"])
+    out = {
+        "config": cfg.name,
+        "train_seed": cfg.train.seed,
+        "eval_seed": seed,
+        "env_steps": steps,
+        "iteration": state["progress"]["iteration"],
+        "task": {k: list(v) for k, v in cfg.task.items()},
+        "report": report,
+    }
+    target = TARGETS.get(cfg.name)
+    if target is not None:
+        falls, speed, budget = target
+        checks = {
+            "falls": report["fall_percent"] <= falls,
+            "speed": abs(report["speed_over_target"] - 1.0) <= speed,
+            "budget": steps - cfg.ppo.num_steps < budget,  # the run stops after the iteration
+        }
+        out |= {"target": {"fall_percent": falls, "speed_within": speed, "env_steps": budget},
+                "checks": checks, "met": all(checks.values())}  # fmt: skip
+    return out
+
+
+def _rows() -> dict[str, list[dict]]:
+    rows: dict[str, list[dict]] = {}
+    for path in sorted(RESULTS.glob("humanoid_family_*_s*_*k.json")):
+        r = json.loads(path.read_text())
+        rows.setdefault(r["config"], []).append(r)
+    return rows
+
+
+def table() -> str:
+    header = ["family", "seed", "env steps", "bodies", "falls in 30 s", "speed / target",
+              "within 15 %", "body error (m)", "worst decile / mean", "target met"]  # fmt: skip
+    lines, verdicts = [], []
+    for config, runs in sorted(_rows().items()):
+        for r in sorted(runs, key=lambda r: (r["train_seed"], r["env_steps"])):
+            rep = r["report"]
+            met = {True: "yes", False: "no", None: "measured"}[r.get("met")]
+            lines.append([
+                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M", rep["episodes"],
+                f"{rep['fall_percent']:.1f} %", f"{rep['speed_over_target']:.2f}",
+                f"{100 * rep['on_target_share']:.0f} %", f"{rep['mean_body_error']:.3f}",
+                f"{rep['worst_decile_return'] / rep['mean_return']:.2f}", met,
+            ])  # fmt: skip
+        latest = {}
+        for r in runs:
+            if r["env_steps"] >= latest.get(r["train_seed"], {"env_steps": -1})["env_steps"]:
+                latest[r["train_seed"]] = r
+        if config in TARGETS:
+            met = [s for s, r in latest.items() if r["met"]]
+            verdict = "met" if len(latest) >= 3 and len(met) == len(latest) else "not yet met"
+            falls = np.mean([r["report"]["fall_percent"] for r in latest.values()])
+            verdicts.append(
+                f"- {config}: seeds {sorted(latest)} evaluated, {len(met)} meeting the target; "
+                f"the 3-seed target is {verdict} (mean falls {falls:.1f} %)."
+            )
+    body = tabulate(lines, headers=header, tablefmt="github", disable_numparse=True)
+    body += "\n\n" + ("\n".join(verdicts) if verdicts else "No family has a judged row yet.")
+    text = DOCS.read_text()
+    start, end = text.index(MARK[0]) + len(MARK[0]), text.index(MARK[1])
+    DOCS.write_text(text[:start] + "\n" + body + "\n" + text[end:])
+    return body
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    e = sub.add_parser("eval")
+    e.add_argument("run", type=Path)
+    e.add_argument("--bodies", type=int, default=300)
+    e.add_argument("--seed", type=int, default=EVAL_SEED)
+    sub.add_parser("table")
+    args = ap.parse_args()
+    if args.cmd == "table":
+        print(table())
+        return
+    r = evaluate_family(args.run, args.bodies, args.seed)
+    stem = f"humanoid_family_{r['config']}_s{r['train_seed']}_{r['env_steps'] // 1000}k"
+    (RESULTS / f"{stem}.json").write_text(json.dumps(r, indent=2))
+    grid = r["report"].get("grid")
+    if grid is not None:
+        title = f"{r['config']} seed {r['train_seed']}, {r['env_steps'] / 1e6:.1f}M steps"
+        write_heatmap(grid, RESULTS / f"{stem}.png", title)
+    rep = r["report"]
+    print(
+        f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps: falls "
+        f"{rep['fall_percent']:.1f} %, speed {rep['speed_over_target']:.2f}x its target, "
+        f"{100 * rep['on_target_share']:.0f} % within 15 %; met: {r.get('met', 'measured')}"
+    )
+    print(f"wrote {RESULTS / stem}.json")
+
+
+if __name__ == "__main__":
+    main()
