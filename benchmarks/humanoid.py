@@ -220,7 +220,7 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
     label = ",".join(sets) or "as shipped"
     cfg = load_config(ROOT / config, overrides | {"train.seed": seed, "actors.num_actors": 2})
     torch.manual_seed(seed)
-    ray.init(num_cpus=2, include_dashboard=False, _node_ip_address="127.0.0.1",
+    ray.init(address="local", num_cpus=2, include_dashboard=False, _node_ip_address="127.0.0.1",
              log_to_driver=False)  # fmt: skip
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as redis:

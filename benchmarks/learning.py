@@ -73,7 +73,8 @@ def _train_ours(
         from services.launch.redis_server import EmbeddedRedis
         from services.launch.stack import ray_stack
 
-        ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+        ray.init(address="local", include_dashboard=False, _node_ip_address="127.0.0.1",
+                 log_to_driver=False)  # fmt: skip
         try:
             with (
                 EmbeddedRedis(run_dir / "redis") as server,

@@ -62,6 +62,7 @@ def main() -> None:
         return gym.make(env_id, task=task, config=env_config)
 
     ray.init(
+        address="local",  # a cluster of its own, never the one Ray's temp dir names
         num_cpus=os.cpu_count(),
         include_dashboard=False,
         _node_ip_address="127.0.0.1",

@@ -234,7 +234,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/sampler.json")
     args = ap.parse_args()
     result: dict = {"cpus": os.cpu_count(), "config": CONFIG}
-    ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    ray.init(address="local", include_dashboard=False, _node_ip_address="127.0.0.1",
+             log_to_driver=False)  # fmt: skip
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as server:
             result["sampler"] = {

@@ -180,6 +180,7 @@ def main() -> None:
     cfg = load_config(ROOT / args.config, {"actors.num_actors": 2})
     rows: dict[str, dict] = {"a_raw_mj_step": {"steps_per_s": raw_steps_per_s(cfg)}}
     ray.init(
+        address="local",  # a cluster of its own, never the one Ray's temp dir names
         num_cpus=os.cpu_count(),
         include_dashboard=False,
         _node_ip_address="127.0.0.1",

@@ -30,7 +30,8 @@ def local_ray():
     """A real local Ray with 3 CPUs, bound to loopback."""
     import ray
 
-    ray.init(num_cpus=3, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    ray.init(address="local", num_cpus=3, include_dashboard=False, _node_ip_address="127.0.0.1",
+             log_to_driver=False)  # fmt: skip
     yield
     ray.shutdown()
 

@@ -243,6 +243,12 @@ class DistributedRun:
 
         if connect(self.opts.ray_address, self.opts.node_ip):
             self.services.callback(ray.shutdown)
+            self.console.print(
+                "Ray: a private local cluster started for this run (token auth); "
+                "--ray-address or RAY_ADDRESS joins another"
+            )
+        else:
+            self.console.print(f"Ray: joined {ray.get_runtime_context().gcs_address}")
         # ray.init puts sys.exit on SIGTERM in the driver: a `kill` or `docker stop` then left
         # in the middle of an iteration and the process aborted on its way out; it stops as
         # Ctrl-C does

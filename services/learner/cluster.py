@@ -10,17 +10,25 @@ import ray
 
 def connect(address: str | None, node_ip: str | None = None) -> bool:
     """Join `address` (or $RAY_ADDRESS) as the Ray node of this machine at `node_ip` (needed
-    only when the machine has several addresses); else start a local Ray. Returns True if
-    started here."""
+    only when the machine has several addresses); else start a private local Ray of this run's
+    own (`address="local"`: never the cluster that Ray's world-writable temp dir names in
+    `ray_current_cluster`, nor a user's `ray start --head`). Returns True if started here."""
     address = address or os.environ.get("RAY_ADDRESS")
     if ray.is_initialized():
         return False
     if address:
         ray.init(address=address, log_to_driver=False, _node_ip_address=node_ip)
         return False
-    local_token_auth()
-    ray.init(include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False)
+    start_private()
     return True
+
+
+def start_private(**options) -> None:
+    """A new local Ray for this process alone: token authentication, no dashboard, and never
+    an existing cluster (Ray would join the one its temp dir names)."""
+    local_token_auth()
+    options = {"include_dashboard": False, "log_to_driver": False} | options
+    ray.init(address="local", _node_ip_address="127.0.0.1", **options)
 
 
 def local_token_auth() -> None:
