@@ -7,13 +7,19 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tempfile
 import textwrap
+from pathlib import Path
 
 
-def test_a_laptop_run_ignores_the_cluster_rays_temp_dir_names(tmp_path):
+def test_a_laptop_run_ignores_the_cluster_rays_temp_dir_names():
     """A bogus address planted in `ray_current_cluster` (Ray would try to join it and hang);
     `connect(None)` starts a private cluster instead, says so, and runs a task on it."""
-    temp = tmp_path / "t"
+    with tempfile.TemporaryDirectory(prefix="ray", dir="/tmp") as short:  # socket paths are short
+        _planted(Path(short))
+
+
+def _planted(temp: Path) -> None:
     (temp / "ray").mkdir(parents=True)
     (temp / "ray" / "ray_current_cluster").write_text("127.0.0.1:9")  # nothing listens
     code = textwrap.dedent(
