@@ -18,6 +18,15 @@ from paramimic.task_space import TaskSpace
 PositiveFloat = Annotated[float, Field(gt=0)]
 NonNegativeFloat = Annotated[float, Field(ge=0)]
 PositiveInt = Annotated[int, Field(gt=0)]
+# An MLP's hidden layers: 1-8 of 1-4096 units ([L21] §7's 4x1024 policy is the largest the
+# papers use); a bound, so that a typo cannot ask for a 120 GB layer after Redis and Ray are up.
+Units = Annotated[int, Field(ge=1, le=4096)]
+Layers = Annotated[tuple[Units, ...], Field(min_length=1, max_length=8)]
+# A seed torch, numpy and Ray all take.
+Seed = Annotated[int, Field(ge=0, le=2**31 - 1)]
+# Bounds of the task goals a config may set (beyond them no body is meant to go).
+GOAL_LIMITS = {"target_velocity": (-20.0, 20.0), "target_direction": (-4 * math.pi, 4 * math.pi),
+               "gravity": (0.0, 10.0), "jump_height": (0.0, 10.0)}  # fmt: skip
 
 # Task goals and physical conditions understood by the environments besides the character's
 # shape parameters.
@@ -219,12 +228,14 @@ class EnvConfig(Section):
         "reference they can follow",
     )
     target_velocity: float | None = Field(
-        None, description="target speed (m/s) when the task space has none; default: the "
-        "gait's own, 1.0 for a procedural gait, the clip's speed for a clip gait (env.gait)",
+        None, ge=-20.0, le=20.0, description="target speed (m/s, within ±20) when the task "
+        "space has none; default: the gait's own, 1.0 for a procedural gait, the clip's speed "
+        "for a clip gait (env.gait)",
     )  # fmt: skip
     target_direction: float = Field(
-        0.0, description="target heading (rad) when the task space has none (3D characters)"
-    )
+        0.0, ge=-4 * math.pi, le=4 * math.pi,
+        description="target heading (rad, within ±4π) when the task space has none (3D)",
+    )  # fmt: skip
     ground_fit: bool = Field(
         True, description="fit a new body's feet to the base's contacts ([WL19] Eq. 1) at reset"
     )
@@ -343,8 +354,10 @@ class EnvConfig(Section):
 class PPOConfig(Section):
     """PPO ([WL19] §3.2, Table 2; [L21] §4.3, §7)."""
 
-    num_steps: int = Field(4096, ge=64, description="T, transitions per policy update")
-    num_epochs: int = Field(10, ge=1, description="N, passes over the batch per update")
+    num_steps: int = Field(
+        4096, ge=64, le=2**22, description="T, transitions per policy update (at most 4M)"
+    )
+    num_epochs: int = Field(10, ge=1, le=100, description="N, passes over the batch per update")
     minibatch_size: int = Field(512, ge=8, description="n, transitions per gradient step")
     policy_lr: PositiveFloat = Field(2e-4, description="policy learning rate ([L21] §7)")
     value_lr: PositiveFloat = Field(1e-3, description="value learning rate ([L21] §7)")
@@ -354,10 +367,10 @@ class PPOConfig(Section):
     ent_coef: float = Field(0.0, ge=0, description="entropy bonus")
     vf_coef: PositiveFloat = Field(0.5, description="value loss weight")
     max_grad_norm: PositiveFloat = Field(0.5, description="gradient clipping")
-    hidden_sizes: tuple[int, ...] = Field(
-        (128, 128, 128), description="3 layers of 128 ([WL19] §5)"
+    hidden_sizes: Layers = Field((128, 128, 128), description="3 layers of 128 ([WL19] §5)")
+    init_log_std: float = Field(
+        -1.0, ge=-20.0, le=2.0, description="initial log std of the Gaussian policy (-20 to 2)"
     )
-    init_log_std: float = Field(-1.0, description="initial log std of the Gaussian policy")
     learn_std: bool = Field(
         True,
         description="false: the policy std stays at exp(init_log_std), as imitation "
@@ -376,13 +389,6 @@ class PPOConfig(Section):
         "joint (the biped's torso: 0.2-0.7 mm), otherwise turns a body 2 % taller into an "
         "input 7-24 sigma off; 0: the experience's std",
     )
-
-    @field_validator("hidden_sizes")
-    @classmethod
-    def _positive_layers(cls, v: tuple[int, ...]) -> tuple[int, ...]:
-        if not v or any(h <= 0 for h in v):
-            raise ValueError("hidden_sizes must be a non-empty list of positive ints")
-        return v
 
 
 class SkillCurriculumConfig(Section):
@@ -412,7 +418,7 @@ class SkillCurriculumConfig(Section):
     knn_sigma: PositiveFloat = Field(0.28, description="σ_k of Eq. 14 (§5.3)")
     p_every: int = Field(10, ge=1, description="policy updates between P_θ fits (§7)")
     p_steps: int = Field(10, ge=1, description="P_θ minibatch updates per fit (§7)")
-    p_hidden: tuple[int, ...] = Field((512, 512), description="P_θ layers (§7)")
+    p_hidden: Layers = Field((512, 512), description="P_θ layers (§7)")
     p_lr: PositiveFloat = Field(1e-3, description="P_θ learning rate (§7)")
     p_batch: int = Field(128, ge=1, description="P_θ minibatch (§7)")
     p_loss_threshold: PositiveFloat = Field(
@@ -482,7 +488,7 @@ class CurriculumConfig(Section):
     burn_in: int = Field(20, ge=0, description="steps each chain takes before it records")
     marginal_lr: PositiveFloat = Field(1e-3, description="α_V̄ ([WL19] Table 2)")
     mu_lr: PositiveFloat = Field(1e-3, description="α_μ ([WL19] Table 2)")
-    marginal_hidden: tuple[int, ...] = Field((64, 64), description="V̄ MLP layers")
+    marginal_hidden: Layers = Field((64, 64), description="V̄ MLP layers")
     marginal_batch: int = Field(128, ge=1, description="minibatch of (a, v) pairs ([L21] §7)")
     display_dims: tuple[str, ...] | None = Field(
         None, description="two task dims for grids (default: the first two free)"
@@ -499,7 +505,9 @@ class ActorsConfig(Section):
     num_actors: int | Literal["auto"] = Field(
         "auto", description="N Ray rollout actors; auto = one per CPU of the cluster"
     )
-    num_envs: int = Field(16, ge=1, description="M, environments stepped together per worker")
+    num_envs: int = Field(
+        16, ge=1, le=1024, description="M, environments stepped together per worker"
+    )
     steps_per_fragment: int | None = Field(
         None, ge=1, description="T per env per fragment; default: ppo.num_steps / (N M)"
     )
@@ -538,7 +546,7 @@ class ActorsConfig(Section):
 
 class TrainConfig(Section):
     total_steps: int = Field(2_000_000, ge=1, description="environment steps to train for")
-    seed: int = Field(0, ge=0)
+    seed: Seed = 0
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
     keep_checkpoints: int | None = Field(
         5, ge=1, description="ckpt_*.pt files kept (older ones are pruned); null: keep all"
@@ -694,6 +702,10 @@ class ExperimentConfig(Section):
                 )
             if lo > hi:
                 raise ValueError(f"task.{name}: min {lo} > max {hi}")
+            if name in GOAL_LIMITS:
+                low, high = GOAL_LIMITS[name]
+                if lo < low or hi > high:
+                    raise ValueError(f"task.{name}: [{lo}, {hi}] leaves [{low:g}, {high:g}]")
             if name in measures or name in TASK_GOALS and name != "gravity":
                 continue
             if lo <= 0:

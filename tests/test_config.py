@@ -59,6 +59,14 @@ def _write(tmp_path, text):
         # a family's shape ranges shrunk toward the base body
         ("shape_scale: 0.5", "(config)", "shape_scale: shrinks the documented shape ranges"),
         ("shape_space: full\nshape_scale: 1.5", "shape_scale", "less than or equal to 1"),
+        # upper bounds: refused before anything starts, not after Redis and Ray are up
+        ("ppo: {hidden_sizes: [1000000000]}", "ppo.hidden_sizes", "less than or equal to 4096"),
+        ("curriculum: {marginal_hidden: [-5]}", "curriculum.marginal_hidden", "greater than"),
+        ("curriculum: {marginal_hidden: [0]}", "curriculum.marginal_hidden", "greater than"),
+        ("curriculum: {marginal_hidden: []}", "curriculum.marginal_hidden", "at least 1 item"),
+        ("train: {seed: 1208925819614629174706176}", "train.seed", "less than or equal to"),
+        ("ppo: {init_log_std: 1.0e300}", "ppo.init_log_std", "less than or equal to 2"),
+        ("task: {target_velocity: [-1.0e300, 1.0e300]}", "task.target_velocity", "leaves [-20"),
     ],
 )
 def test_bad_configs_name_the_field(tmp_path, text, field, reason):

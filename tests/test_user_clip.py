@@ -104,8 +104,9 @@ def test_clip_info_measures_each_shipped_clip(name):
         (lambda raw: raw["Frames"][2].__setitem__(0, 0.0), "non-positive duration"),
         (lambda raw: raw.update(Loop="bounce"), "Loop must be"),
         (lambda raw: raw.pop("Frames"), "not a DeepMimic clip"),
+        (lambda raw: raw["Frames"][0].__setitem__(0, 1e308), "frames last at most 10 s"),
     ],
-    ids=["joint-count", "nan", "duration", "loop", "no-frames"],
+    ids=["joint-count", "nan", "duration", "loop", "no-frames", "forever"],
 )
 def test_bad_clip_files_fail_before_anything_starts(tmp_path, edit, words):
     """The train preflight parses the file (validating the config reads none)."""
@@ -116,8 +117,12 @@ def test_bad_clip_files_fail_before_anything_starts(tmp_path, edit, words):
     assert "env.clip" in str(err.value) and words in str(err.value)
 
 
-def test_truncated_and_missing_files_are_named(tmp_path):
+def test_truncated_deep_and_missing_files_are_named(tmp_path):
     clip = _user_clip(tmp_path)
+    deep = tmp_path / "deep.txt"
+    deep.write_text("[" * 100_000 + "]" * 100_000)  # deeper than Python's JSON parser goes
+    with pytest.raises(PreflightError, match="nested too deep"):
+        preflight(load_config(_config(tmp_path, deep)))
     clip.write_text(clip.read_text()[:500])  # truncated JSON
     with pytest.raises(PreflightError, match="env.clip: .*not a DeepMimic clip"):
         preflight(load_config(_config(tmp_path, clip)))

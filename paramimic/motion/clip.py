@@ -147,6 +147,10 @@ DEEPMIMIC_FRAME = 1 + 3 + 4 + sum(n for _, n in DEEPMIMIC_JOINTS)  # 44
 Y_UP_TO_Z_UP = Rotation.from_rotvec([np.pi / 2, 0.0, 0.0])
 
 
+MAX_FRAME_SECONDS = 10.0  # a frame longer than this is no motion capture
+MAX_CLIP_SECONDS = 600.0  # a clip is a skill or a gait cycle, not a recording session
+
+
 def load_deepmimic(path: str | Path, name: str | None = None, text: str | None = None) -> Clip:
     """A DeepMimic humanoid3d clip: {"Loop": "wrap"|"none", "Frames": [[44 numbers], ...]},
     read from `path`, or parsed from `text` (the file's content, carried with a run; `path`
@@ -158,6 +162,8 @@ def load_deepmimic(path: str | Path, name: str | None = None, text: str | None =
     try:
         raw = json.loads(path.read_text() if text is None else text)
         frames = np.asarray(raw["Frames"], np.float64)
+    except RecursionError:  # JSON nested deeper than Python's parser goes
+        raise ValueError(f"{path}: not a DeepMimic clip: nested too deep") from None
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{path}: not a DeepMimic clip: {e}") from e
     if frames.ndim != 2 or frames.shape[1] != DEEPMIMIC_FRAME:
@@ -172,6 +178,11 @@ def load_deepmimic(path: str | Path, name: str | None = None, text: str | None =
     if (frames[:-1, 0] <= 0).any():
         k = int(np.argmax(frames[:-1, 0] <= 0))
         raise ValueError(f"{path}: frame {k} has a non-positive duration {frames[k, 0]}")
+    if (frames[:, 0] > MAX_FRAME_SECONDS).any() or frames[:-1, 0].sum() > MAX_CLIP_SECONDS:
+        raise ValueError(
+            f"{path}: frames last at most {MAX_FRAME_SECONDS:g} s each and a clip at most "
+            f"{MAX_CLIP_SECONDS:g} s; this one lasts {frames[:-1, 0].sum():g} s"
+        )
     loop = raw.get("Loop", "none")
     if loop not in ("wrap", "none"):
         raise ValueError(f"{path}: Loop must be 'wrap' or 'none', got {loop!r}")
