@@ -517,6 +517,46 @@ def clip_info(
         console.print(f"  {key:40s} {value}")
 
 
+@clip_app.command("import")
+def clip_import(
+    bvh: Annotated[Path, typer.Argument(help="a BVH motion capture file")],
+    out: Annotated[Path, typer.Option(help="the humanoid clip to write (DeepMimic format)")],
+    skeleton: Annotated[
+        str, typer.Option(help="auto, cmu, mixamo, lafan1, or a YAML map (role: joint name)")
+    ] = "auto",
+    start: Annotated[float | None, typer.Option(help="first second kept")] = None,
+    end: Annotated[float | None, typer.Option(help="last second kept")] = None,
+    fps: Annotated[float, typer.Option(help="frames per second of the clip")] = 30.0,
+    scale: Annotated[
+        float | None, typer.Option(help="metres per file unit (default: from the legs)")
+    ] = None,
+    up: Annotated[str, typer.Option(help="the file's up axis: auto, +y, +z, ...")] = "auto",
+    mirror: Annotated[bool, typer.Option(help="swap left and right")] = False,
+    loop: Annotated[bool, typer.Option(help="mark the clip as looping (a gait cycle)")] = False,
+) -> None:
+    """Retarget a BVH file onto the humanoid and write it as a clip that `env.clip` (a skill)
+    or `env.gait` (with --loop) trains on; says which skeleton map it chose and why, the
+    units, and how the feet meet the floor."""
+    from paramimic.characters.bvh_import import import_bvh
+
+    try:
+        imported = import_bvh(bvh, skeleton, start, end, fps, scale, up, mirror)
+        text = imported.text("wrap" if loop else "none")
+        imported.clip(out.stem, "wrap" if loop else "none")  # it reads back as env.clip does
+    except (ValueError, KeyError) as e:
+        _fail(str(e))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    report = imported.report
+    console.print(f"skeleton map {report['skeleton']!r}: {report['why']}")
+    console.print(f"up axis {report['up_axis']}; {report['metres_per_unit']:.4g} m per unit "
+                  f"({report['units_guess']})")  # fmt: skip
+    console.print(f"{report['frames']} frames, {report['seconds']:.2f} s at {fps:g} fps; "
+                  f"lowest foot point {report['lowest_foot_min_m']:+.3f} m; feet on the "
+                  f"ground in {100 * report['contact_share']:.0f} % of the frames")  # fmt: skip
+    console.print(f"wrote {out}")
+
+
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
 

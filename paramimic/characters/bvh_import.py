@@ -1,0 +1,422 @@
+"""A user's motion capture (BVH) as a humanoid clip in DeepMimic's format.
+
+The file is parsed with pybvh (numpy-native, per-joint Euler orders, forward kinematics, up-axis
+detection, resampling and mirroring, maintained; bvhio's per-joint transform objects are slower
+and need PyGLM). The source skeleton's joints are mapped onto the humanoid's by one of the
+built-in maps or a user's YAML map (`detect_map`), and the motion is retargeted by positions:
+for every frame, the humanoid's body frames are built from the source's joint positions, so a
+source whose rest pose differs from the humanoid's (a T-pose against arms hanging down) needs no
+rest-pose alignment:
+
+- the pelvis from the hips' lateral axis and the spine, the chest from the shoulders and the
+  neck, the neck from the head (the humanoid's +x forward, +y up, +z right);
+- each thigh and upper arm along its bone, twisted so that the next bone lies in the plane of
+  the 1-DOF knee or elbow: the knee (<= 0) and elbow (>= 0) angles are the angles between the
+  bones, projected onto the hinge; a limb bent the wrong way or held straight keeps the twist of
+  the pelvis or chest and is counted in the report;
+- each foot along the ankle-to-toe direction, its pitch corrected by the source's rest foot
+  (the rest foot is flat);
+- the root's path scaled by the ratio of the legs' lengths (the humanoid's over the source's,
+  which also converts the file's units), resampled to `fps`, and moved vertically so that the
+  lowest foot point touches the floor whenever the source stands (pybvh's foot contacts):
+  between contacts the offset is interpolated, so a jump still leaves the ground.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from paramimic.characters.humanoid import BASE_LEG, HUMANOID, SIDES
+from paramimic.motion.clip import Clip, load_deepmimic
+
+# the roles a map names: the humanoid's joints and what their frames are built from
+ROLES = ("hips", "spine", "chest", "neck", "head") + tuple(
+    f"{side}_{part}"
+    for side in SIDES
+    for part in ("thigh", "knee", "ankle", "toe", "upper_arm", "elbow", "wrist")
+)
+STRAIGHT = np.radians(5.0)  # a limb bent less than this keeps its parent's twist
+
+
+@dataclass(frozen=True)
+class SkeletonMap:
+    """Source joint names of every role; `why` says how it was chosen."""
+
+    name: str
+    joints: dict[str, str]
+    why: str = ""
+
+
+def _sided(left: dict[str, str], right: dict[str, str], trunk: dict[str, str]) -> dict[str, str]:
+    out = dict(trunk)
+    for side, names in (("left", left), ("right", right)):
+        out |= {f"{side}_{role}": name for role, name in names.items()}
+    return out
+
+
+def _limbs(prefix: str, side: str, names: tuple[str, ...]) -> dict[str, str]:
+    roles = ("thigh", "knee", "ankle", "toe", "upper_arm", "elbow", "wrist")
+    return {role: f"{prefix}{side}{n}" for role, n in zip(roles, names, strict=True)}
+
+
+# CMU / 3ds Max: LeftShoulder is the upper arm (its parent LeftCollar the clavicle)
+CMU = SkeletonMap("cmu", _sided(
+    _limbs("", "Left", ("Hip", "Knee", "Ankle", "Toe", "Shoulder", "Elbow", "Wrist")),
+    _limbs("", "Right", ("Hip", "Knee", "Ankle", "Toe", "Shoulder", "Elbow", "Wrist")),
+    {"hips": "Hips", "spine": "Chest", "chest": "Chest2", "neck": "Neck", "head": "Head"},
+))  # fmt: skip
+# Mixamo and LAFAN1: LeftShoulder is the clavicle, LeftArm the upper arm
+MIXAMO = SkeletonMap("mixamo", _sided(
+    _limbs("mixamorig:", "Left", ("UpLeg", "Leg", "Foot", "ToeBase", "Arm", "ForeArm", "Hand")),
+    _limbs("mixamorig:", "Right", ("UpLeg", "Leg", "Foot", "ToeBase", "Arm", "ForeArm", "Hand")),
+    {"hips": "mixamorig:Hips", "spine": "mixamorig:Spine", "chest": "mixamorig:Spine2",
+     "neck": "mixamorig:Neck", "head": "mixamorig:Head"},
+))  # fmt: skip
+LAFAN1 = SkeletonMap("lafan1", _sided(
+    _limbs("", "Left", ("UpLeg", "Leg", "Foot", "Toe", "Arm", "ForeArm", "Hand")),
+    _limbs("", "Right", ("UpLeg", "Leg", "Foot", "Toe", "Arm", "ForeArm", "Hand")),
+    {"hips": "Hips", "spine": "Spine", "chest": "Spine2", "neck": "Neck", "head": "Head"},
+))  # fmt: skip
+MAPS = (CMU, MIXAMO, LAFAN1)
+
+
+def _chains_fit(joints: dict[str, str], parent: dict[str, str | None]) -> bool:
+    """The limbs are chains: each knee's and elbow's joint descends from its thigh or upper
+    arm, each ankle and wrist from its knee or elbow (a name can mean different bones in
+    different namings: CMU's LeftShoulder is an upper arm, Mixamo's and LAFAN1's a clavicle)."""
+
+    def descends(child: str, ancestor: str) -> bool:
+        node = parent.get(child)
+        while node is not None:
+            if node == ancestor:
+                return True
+            node = parent.get(node)
+        return False
+
+    pairs = [("thigh", "knee"), ("knee", "ankle"), ("ankle", "toe"), ("upper_arm", "elbow"),
+             ("elbow", "wrist")]  # fmt: skip
+    limbs = all(descends(joints[f"{s}_{b}"], joints[f"{s}_{a}"]) for s in SIDES for a, b in pairs)
+    return limbs and all(descends(joints[f"{s}_upper_arm"], joints["chest"]) for s in SIDES)
+
+
+def detect_map(names: list[str], parent: dict[str, str | None], skeleton: str = "auto"):
+    """The skeleton map of a source: `skeleton` names a built-in map or a YAML file
+    (role: source joint), or `auto` picks the built-in map whose names all exist and whose
+    limbs are chains in the source's hierarchy. ValueError says what is missing."""
+    if skeleton not in ("auto", *(m.name for m in MAPS)):
+        path = Path(skeleton)
+        try:
+            joints = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as e:
+            raise ValueError(f"--skeleton {skeleton}: cannot read the map: {e}") from None
+        if not isinstance(joints, dict):
+            raise ValueError(f"--skeleton {skeleton}: a map is 'role: source joint' lines")
+        candidates = [SkeletonMap(path.stem, {str(k): str(v) for k, v in joints.items()})]
+    else:
+        candidates = [m for m in MAPS if skeleton in ("auto", m.name)]
+    present = set(names)
+    notes = []
+    for m in candidates:
+        unknown = sorted(set(m.joints) - set(ROLES))
+        missing_roles = sorted(set(ROLES) - set(m.joints))
+        if unknown or missing_roles:
+            notes.append(f"{m.name}: roles {missing_roles} missing, {unknown} unknown")
+            continue
+        missing = sorted(n for n in m.joints.values() if n not in present)
+        if missing:
+            notes.append(f"{m.name}: no joint {', '.join(missing[:4])}")
+            continue
+        if not _chains_fit(m.joints, parent):
+            notes.append(f"{m.name}: its names exist but its limbs are not chains here")
+            continue
+        why = f"every joint of the {m.name!r} map exists and its limbs are chains"
+        if skeleton != "auto":
+            why = f"{m.name!r} as asked; " + why
+        return SkeletonMap(m.name, m.joints, why)
+    raise ValueError(
+        "no skeleton map fits this file (" + "; ".join(notes) + "); give one with "
+        "--skeleton map.yaml (role: source joint name, roles: " + ", ".join(ROLES) + ")"
+    )
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def _orth(v: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """`v` without its component along the unit `axis`, normalized."""
+    return _unit(v - (v * axis).sum(-1, keepdims=True) * axis)
+
+
+def _frame(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    return np.stack([x, y, z], axis=-1)  # columns: the body's axes in the world
+
+
+def _limb(base: np.ndarray, mid: np.ndarray, end: np.ndarray, parent: np.ndarray, bend: float):
+    """(frame [F, 3, 3], hinge angle [F], projection error [F] in rad) of a two-bone limb: the
+    upper bone along -y, twisted so that the lower bone lies in the x-y plane (the hinge's),
+    bending to `bend` x (+1: forward, an elbow; -1: backward, a knee). A limb nearly straight
+    (< STRAIGHT) or bent against its hinge has no twist against its `parent`'s frame ([F, 3, 3]:
+    the parent's +x swung with the bone from the parent's -y) and its lower bone is projected
+    onto the hinge's plane and range: the angle between the source's lower bone and the
+    projection is the error."""
+    d1, d2 = mid - base, end - mid
+    axis = _unit(d1)
+    y = -axis
+    perp = d2 - (d2 * axis).sum(-1, keepdims=True) * axis
+    angle = np.arctan2(np.linalg.norm(perp, axis=-1), (d2 * axis).sum(-1))
+    x_bent = _unit(perp) * bend  # the lower bone goes toward +x for an elbow, -x for a knee
+    fallback = _orth(_swing(parent[..., 0], -parent[..., 1], axis), y)
+    usable = (angle > STRAIGHT) & ((x_bent * fallback).sum(-1) > -0.5)
+    x = _orth(np.where(usable[:, None], x_bent, fallback), y)
+    z = np.cross(x, y)
+    lower = _unit(d2)
+    u, v = (lower * x).sum(-1), (lower * y).sum(-1)
+    hinge = np.arctan2(u, -v)  # the lower bone's angle in the hinge's plane
+    hinge = np.minimum(hinge, 0.0) if bend < 0 else np.maximum(hinge, 0.0)
+    projected = np.stack([np.sin(hinge), -np.cos(hinge), np.zeros_like(hinge)], -1)
+    projected = np.einsum("fij,fj->fi", _frame(x, y, z), projected)
+    error = np.arccos(np.clip((projected * lower).sum(-1), -1.0, 1.0))
+    return _frame(x, y, z), hinge, error
+
+
+@dataclass
+class Imported:
+    """The DeepMimic frames [n, 44] and what the import did."""
+
+    frames: np.ndarray
+    report: dict = field(default_factory=dict)
+
+    def clip(self, name: str = "imported", loop: str = "none") -> Clip:
+        return load_deepmimic(Path(f"{name}.txt"), name=name, text=self.text(loop))
+
+    def text(self, loop: str = "none") -> str:
+        rows = ",\n".join("[" + ", ".join(f"{v:.8f}" for v in row) + "]" for row in self.frames)
+        return f'{{\n"Loop": "{loop}",\n"Frames":\n[\n{rows}\n]\n}}\n'
+
+
+def import_bvh(
+    path: str | Path,
+    skeleton: str = "auto",
+    start: float | None = None,
+    end: float | None = None,
+    fps: float = 30.0,
+    scale: float | None = None,
+    up: str = "auto",
+    mirror: bool = False,
+) -> Imported:
+    """Read a BVH file and retarget it onto the humanoid (see the module's docstring).
+    `scale`: metres per file unit (default: the humanoid's leg length over the source's);
+    `up`: the file's up axis ('+y', '+z', ...; auto: pybvh's detection); `start`/`end`: the
+    seconds kept; `mirror`: left and right swapped."""
+    import pybvh
+
+    if up != "auto":
+        if up.lstrip("+-") not in ("x", "y", "z") or len(up) > 2:
+            raise ValueError(f"--up {up!r}: auto, or an axis such as +y, -z, x")
+        up = up if up[0] in "+-" else "+" + up
+    try:
+        bvh = pybvh.read_bvh_file(str(path), world_up="+y" if up == "auto" else up,
+                                  warn_on_world_up_disagreement=False)  # fmt: skip
+    except (OSError, ValueError, IndexError, KeyError) as e:
+        raise ValueError(f"{path}: not a readable BVH file: {e}") from None
+    source_fps, frame_count = float(bvh.fps), int(bvh.frame_count)
+    first = 0 if start is None else int(round(start * source_fps))
+    last = frame_count if end is None else min(frame_count, int(round(end * source_fps)) + 1)
+    if not 0 <= first < last - 1:
+        raise ValueError(f"--start/--end keep no frames of the {frame_count / source_fps:.2f} s")
+    if mirror:
+        bvh = bvh.mirror()
+    nodes = {n.name: n for n in bvh.nodes}
+    parent = {n.name: (n.parent.name if n.parent is not None else None) for n in bvh.nodes}
+    chosen = detect_map([n.name for n in bvh.nodes], parent, skeleton)
+    if fps <= 0:
+        raise ValueError(f"--fps must be positive, got {fps}")
+    index = {name: i for i, name in enumerate(nodes)}
+    positions = bvh.node_positions()[first:last]  # [F, N, 3], the file's frame and units
+    positions = _resample(positions, source_fps, fps)
+    rest = bvh.rest_pose_positions()
+    if up == "auto":  # from the rest pose: the head above the feet (pybvh's guess reads motion)
+        head = rest[index[chosen.joints["head"]]]
+        feet = np.mean([rest[index[chosen.joints[f"{s}_ankle"]]] for s in SIDES], axis=0)
+        axis = int(np.argmax(np.abs(head - feet)))
+        up = ("+" if head[axis] > feet[axis] else "-") + "xyz"[axis]
+    bvh.world_up = up
+    to_y_up = _to_y_up(up)
+    positions, rest = positions @ to_y_up.T, rest @ to_y_up.T
+    P = {role: positions[:, index[name]] for role, name in chosen.joints.items()}
+    R0 = {role: rest[index[name]] for role, name in chosen.joints.items()}
+    leg = np.mean([np.linalg.norm(R0[f"{s}_knee"] - R0[f"{s}_thigh"]) +
+                   np.linalg.norm(R0[f"{s}_ankle"] - R0[f"{s}_knee"]) for s in SIDES])  # fmt: skip
+    metres = BASE_LEG / leg if scale is None else scale
+    frames, flipped = _humanoid_frames(P, R0, metres)
+    n = len(frames)
+    frames[:, 0] = 1.0 / fps
+    frames[-1, 0] = 0.0
+    contacts = _contacts(bvh, first, last, source_fps, fps, n)
+    lift, lowest = _ground(frames, contacts)
+    frames[:, 2] += lift
+    report = {
+        "file": str(path),
+        "skeleton": chosen.name,
+        "why": chosen.why,
+        "source_fps": source_fps,
+        "fps": fps,
+        "frames": n,
+        "seconds": (n - 1) / fps,
+        "up_axis": up,
+        "metres_per_unit": float(metres),
+        "units_guess": _units(metres),
+        # the knees and elbows are 1-DOF: the angle (deg) between the source's lower bone and
+        # the humanoid's, mean and max over the frames
+        "hinge_error_deg": {
+            k: [float(np.degrees(v.mean())), float(np.degrees(v.max()))] for k, v in flipped.items()
+        },  # fmt: skip
+        # the lowest foot point over the clip: 0 on the frames the source stands, never far
+        # below the floor between them
+        "lowest_foot_min_m": float(lowest.min()),
+        "contact_share": float(contacts.mean()),
+    }
+    return Imported(frames, report)
+
+
+def _resample(positions: np.ndarray, source_fps: float, fps: float) -> np.ndarray:
+    """Joint positions at `fps` by linear interpolation in time."""
+    t_source = np.arange(len(positions)) / source_fps
+    t = np.arange(0.0, t_source[-1] + 1e-9, 1.0 / fps)
+    flat = positions.reshape(len(positions), -1)
+    out = np.stack([np.interp(t, t_source, col) for col in flat.T], axis=1)
+    return out.reshape(len(t), *positions.shape[1:])
+
+
+def _to_y_up(up: str) -> np.ndarray:
+    """The rotation taking the file's up axis to +y (the humanoid file's frame)."""
+    axis = {"x": 0, "y": 1, "z": 2}[up[-1]]
+    vec = np.zeros(3)
+    vec[axis] = -1.0 if up.startswith("-") else 1.0
+    rot, _ = Rotation.align_vectors([[0.0, 1.0, 0.0]], [vec])
+    return rot.as_matrix()
+
+
+def _units(metres_per_unit: float) -> str:
+    for name, value in (("metres", 1.0), ("decimetres", 0.1), ("centimetres", 0.01),
+                        ("CMU's units (1/0.45 inch)", 0.0254 / 0.45), ("inches", 0.0254),
+                        ("millimetres", 0.001)):  # fmt: skip
+        if 0.85 < metres_per_unit / value < 1.15:
+            return name
+    return f"{metres_per_unit:.4g} m per unit (a skeleton of another size)"
+
+
+def _humanoid_frames(P: dict, R0: dict, metres: float):
+    """DeepMimic frames [F, 44] (durations left to the caller) from source joint positions."""
+    y_root = _unit(P["spine"] - P["hips"])
+    z_root = _orth(P["right_thigh"] - P["left_thigh"], y_root)
+    root = _frame(np.cross(y_root, z_root), y_root, z_root)
+    y_chest = _unit(P["neck"] - P["chest"])
+    z_chest = _orth(P["right_upper_arm"] - P["left_upper_arm"], y_chest)
+    chest = _frame(np.cross(y_chest, z_chest), y_chest, z_chest)
+    y_neck = _unit(P["head"] - P["neck"])
+    z_neck = _orth(z_chest, y_neck)
+    neck = _frame(np.cross(y_neck, z_neck), y_neck, z_neck)
+    local = {"chest": _local(root, chest), "neck": _local(chest, neck)}
+    hinge, flipped = {}, {}
+    for side in SIDES:
+        thigh, knee, flipped[f"{side}_knee"] = _limb(
+            P[f"{side}_thigh"], P[f"{side}_knee"], P[f"{side}_ankle"], root, -1.0
+        )
+        shin = thigh @ _rz(knee)
+        foot = _foot(P[f"{side}_ankle"], P[f"{side}_toe"], shin, R0, side)
+        arm, elbow, flipped[f"{side}_elbow"] = _limb(
+            P[f"{side}_upper_arm"], P[f"{side}_elbow"], P[f"{side}_wrist"], chest, 1.0
+        )
+        local[f"{side}_hip"], local[f"{side}_ankle"] = _local(root, thigh), _local(shin, foot)
+        local[f"{side}_shoulder"] = _local(chest, arm)
+        hinge[f"{side}_knee"], hinge[f"{side}_elbow"] = knee, elbow
+    n = len(root)
+    frames = np.zeros((n, 44))
+    frames[:, 1:4] = P["hips"] * metres
+    frames[:, 4:8] = _quat(root)
+    col = 8  # DeepMimic's column order (paramimic/data/deepmimic/README.md)
+    for joint in ("chest", "neck", "right_hip", "right_knee", "right_ankle", "right_shoulder",
+                  "right_elbow", "left_hip", "left_knee", "left_ankle", "left_shoulder",
+                  "left_elbow"):  # fmt: skip
+        if joint in hinge:
+            frames[:, col] = hinge[joint]
+            col += 1
+        else:
+            frames[:, col : col + 4] = _quat(local[joint])
+            col += 4
+    return frames, flipped
+
+
+def _swing(v: np.ndarray, rest: np.ndarray, bone: np.ndarray) -> np.ndarray:
+    """`v` [F, 3] turned by the shortest rotation that takes the unit `rest` to the unit `bone`
+    (Rodrigues' formula; the twist-free motion of a bone)."""
+    axis = np.cross(rest, bone)
+    sin, cos = np.linalg.norm(axis, axis=-1, keepdims=True), (rest * bone).sum(-1, keepdims=True)
+    k = axis / np.maximum(sin, 1e-12)
+    return v * cos + np.cross(k, v) * sin + k * (k * v).sum(-1, keepdims=True) * (1.0 - cos)
+
+
+def _rz(angle: np.ndarray) -> np.ndarray:
+    return Rotation.from_euler("z", np.asarray(angle)[:, None]).as_matrix()
+
+
+def _local(parent: np.ndarray, child: np.ndarray) -> np.ndarray:
+    return np.swapaxes(parent, -1, -2) @ child
+
+
+def _quat(matrices: np.ndarray) -> np.ndarray:
+    """w-first quaternions, sign-continuous along the frames."""
+    q = Rotation.from_matrix(matrices).as_quat(scalar_first=True)
+    for k in range(1, len(q)):
+        if q[k] @ q[k - 1] < 0:
+            q[k] = -q[k]
+    return q
+
+
+def _foot(ankle: np.ndarray, toe: np.ndarray, shin: np.ndarray, R0: dict, side: str):
+    """The foot's frame: +x toward the toe, its pitch corrected so that the source's rest foot
+    is flat, +z the shin's lateral axis."""
+    x = _unit(toe - ankle)
+    z = _orth(shin[..., 2], x)
+    y = np.cross(z, x)
+    rest = R0[f"{side}_toe"] - R0[f"{side}_ankle"]
+    pitch = np.arctan2(rest[1], np.hypot(rest[0], rest[2]))  # below the horizontal: < 0
+    return _frame(x, y, z) @ Rotation.from_euler("z", -pitch).as_matrix()
+
+
+def _contacts(bvh, first: int, last: int, source_fps: float, fps: float, n: int) -> np.ndarray:
+    """Frames (at `fps`) where a foot of the source is on the ground (pybvh's detection)."""
+    labels = np.asarray(bvh.foot_contacts())[first:last]  # [F, feet]
+    on = labels.reshape(len(labels), -1).max(axis=1) > 0.5
+    t = np.arange(n) / fps
+    return np.interp(t, np.arange(len(on)) / source_fps, on.astype(float)) > 0.5
+
+
+def _ground(frames: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertical offset [F] that puts the humanoid's lowest foot point on the floor at every
+    contact frame (interpolated between them; the median where the source never stands), and
+    the lowest foot point after it."""
+    clip = load_deepmimic(Path("bvh.txt"), text=json.dumps({"Frames": frames.tolist()}))
+    body = HUMANOID.compile()
+    qpos = HUMANOID.pose_qpos(body, clip.sample(np.cumsum(np.r_[0.0, clip.durations[:-1]])))
+    data = mujoco.MjData(body.model)
+    lowest = np.zeros(len(qpos))
+    for k, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(body.model, data)
+        lowest[k] = data.site_xpos[body.contact_site_ids, 2].min()
+    t = np.arange(len(lowest))
+    if contacts.any():
+        lift = np.interp(t, t[contacts], -lowest[contacts])
+    else:
+        lift = np.full(len(lowest), -np.median(lowest))
+    return lift, lowest + lift

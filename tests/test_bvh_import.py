@@ -1,0 +1,159 @@
+"""A user's BVH motion capture retargeted onto the humanoid (`paramimic clip import`), checked
+against the source through MuJoCo's kinematics."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pybvh
+import pytest
+
+from paramimic.characters import registration
+from paramimic.characters.bvh_import import import_bvh
+from paramimic.characters.humanoid import HUMANOID
+from paramimic.motion.clip import Y_UP_TO_Z_UP
+
+CMU_FILE = (
+    Path(__file__).resolve().parents[2] / "shared" / "motions" / "bvh" / "cmu_131_01_walk.bvh"
+)
+BONES = [  # humanoid (parent, child) bodies and the CMU joints at their ends
+    ("left_hip", "left_knee", "LeftHip", "LeftKnee"),
+    ("left_knee", "left_ankle", "LeftKnee", "LeftAnkle"),
+    ("right_hip", "right_knee", "RightHip", "RightKnee"),
+    ("right_knee", "right_ankle", "RightKnee", "RightAnkle"),
+    ("left_shoulder", "left_elbow", "LeftShoulder", "LeftElbow"),
+    ("left_elbow", "left_wrist", "LeftElbow", "LeftWrist"),
+    ("right_shoulder", "right_elbow", "RightShoulder", "RightElbow"),
+    ("right_elbow", "right_wrist", "RightElbow", "RightWrist"),
+]
+# the CMU file renamed as Mixamo and LAFAN1 name their bones: "LeftShoulder" is CMU's upper arm
+# and those namings' clavicle (CMU's LeftCollar)
+LIMBS = {"Collar": "Shoulder", "Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand",
+         "Hip": "UpLeg", "Knee": "Leg", "Ankle": "Foot"}  # fmt: skip
+pytestmark = pytest.mark.skipif(not CMU_FILE.is_file(), reason="needs ../shared beside the repo")
+
+
+@pytest.fixture(scope="module")
+def cmu():
+    return import_bvh(CMU_FILE)
+
+
+def _world(imported):
+    """The humanoid's body positions [F, bodies, 3] playing the imported clip (MuJoCo)."""
+    clip = imported.clip("imported")
+    body = HUMANOID.compile()
+    qpos = HUMANOID.pose_qpos(body, clip.sample(np.arange(len(imported.frames)) / 30.0))
+    data = mujoco.MjData(body.model)
+    out = []
+    for q in qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(body.model, data)
+        out.append(data.xpos.copy())
+    return body, np.array(out)
+
+
+def test_the_cmu_file_is_read_mapped_and_its_bones_followed(cmu):
+    report = cmu.report
+    assert report["skeleton"] == "cmu" and "chains" in report["why"]
+    assert report["units_guess"] == "CMU's units (1/0.45 inch)" and report["up_axis"] == "+y"
+    assert report["fps"] == 30.0 and report["frames"] == 249  # 8.27 s at 120 fps, resampled
+    body, xpos = _world(cmu)
+    source = pybvh.read_bvh_file(str(CMU_FILE)).resample(30.0)
+    names = [n.name for n in source.nodes]
+    positions = source.node_positions() @ Y_UP_TO_Z_UP.as_matrix().T
+    for parent, child, a, b in BONES:
+        mine = xpos[:, body.model.body(child).id] - xpos[:, body.model.body(parent).id]
+        theirs = positions[:, names.index(b)] - positions[:, names.index(a)]
+        cos = (mine * theirs).sum(-1) / np.linalg.norm(mine, axis=-1)
+        cos /= np.linalg.norm(theirs, axis=-1)
+        error = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+        if parent.endswith(("hip", "shoulder")):  # a ball joint: exact
+            assert error.max() < 1e-3, (parent, child)
+        else:  # a 1-DOF knee or elbow: its projection, as the report says
+            mean, most = report["hinge_error_deg"][parent]
+            assert error.mean() == pytest.approx(mean, abs=1e-3) and error.mean() < 1.0
+            assert error.max() == pytest.approx(most, abs=1e-3) and error.max() < 10.0
+    knees, elbows = cmu.frames[:, [20, 34]], cmu.frames[:, [29, 43]]
+    assert (knees <= 1e-9).all() and (elbows >= -1e-9).all()  # 1-DOF joints bend their way
+
+
+def test_the_feet_meet_the_floor(cmu):
+    """No sinking, no floating: the lowest foot point is on the floor whenever the source
+    stands, and not more than 3 cm below it in between."""
+    body = HUMANOID.compile()
+    clip = cmu.clip("imported")
+    qpos = HUMANOID.pose_qpos(body, clip.sample(np.arange(len(cmu.frames)) / 30.0))
+    data = mujoco.MjData(body.model)
+    lowest = []
+    for q in qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(body.model, data)
+        lowest.append(data.site_xpos[body.contact_site_ids, 2].min())
+    lowest = np.array(lowest)
+    assert lowest.min() > -0.03 and np.median(np.abs(lowest)) < 0.01
+    assert cmu.report["lowest_foot_min_m"] == pytest.approx(lowest.min(), abs=1e-6)
+
+
+@pytest.mark.parametrize(("naming", "prefix", "expected"), [("mixamo", "mixamorig:", "mixamo"),
+                                                           ("lafan1", "", "lafan1")])  # fmt: skip
+def test_other_namings_are_detected_by_names_and_chains(tmp_path, cmu, naming, prefix, expected):
+    """The same motion named as Mixamo or LAFAN1 name bones (their LeftShoulder is the
+    clavicle), in centimetres: the same clip, the units found."""
+    toe = "ToeBase" if naming == "mixamo" else "Toe"
+    limbs = LIMBS | {"Toe": toe}
+    text = re.sub(
+        r"\b(Left|Right)(Collar|Shoulder|Elbow|Wrist|Hip|Knee|Ankle|Toe)\b",
+        lambda m: f"{prefix}{m[1]}{limbs[m[2]]}",
+        CMU_FILE.read_text(),
+    )
+    trunk = {"Hips": "Hips", "Chest": "Spine", "Chest2": "Spine2", "Neck": "Neck", "Head": "Head"}
+    text = re.sub(r"(ROOT|JOINT) (Hips|Chest2|Chest|Neck|Head)\b",
+                  lambda m: f"{m[1]} {prefix}{trunk[m[2]]}", text)  # fmt: skip
+    path = tmp_path / f"{naming}.bvh"
+    path.write_text(text)
+    pybvh.read_bvh_file(str(path)).scale(5.644).write(str(path))  # CMU units -> centimetres
+    imported = import_bvh(path)
+    assert imported.report["skeleton"] == expected
+    assert imported.report["units_guess"] == "centimetres"
+    np.testing.assert_allclose(imported.frames[:, 4:], cmu.frames[:, 4:], atol=1e-5)
+    np.testing.assert_allclose(imported.frames[:, 1:4], cmu.frames[:, 1:4], atol=1e-4)
+
+
+def test_trim_rate_mirror_and_bad_input(tmp_path, cmu):
+    short = import_bvh(CMU_FILE, start=1.0, end=3.0, fps=60.0)
+    assert short.report["frames"] == 121 and short.frames[0, 0] == pytest.approx(1 / 60)
+    mirrored = import_bvh(CMU_FILE, mirror=True)
+    np.testing.assert_allclose(mirrored.frames[:, 34], cmu.frames[:, 20], atol=1e-6)  # knees
+    with pytest.raises(ValueError, match="not a readable BVH file"):
+        (tmp_path / "bad.bvh").write_text("HIERARCHY\nROOT Hips\n{")
+        import_bvh(tmp_path / "bad.bvh")
+    (tmp_path / "map.yaml").write_text("hips: Hips\n")
+    with pytest.raises(ValueError, match="roles .* missing"):
+        import_bvh(CMU_FILE, skeleton=str(tmp_path / "map.yaml"))
+    with pytest.raises(ValueError, match="keep no frames"):
+        import_bvh(CMU_FILE, start=20.0)
+
+
+def test_paramimic_clip_import_writes_a_clip_that_trains(tmp_path):
+    """The command as a user runs it; the clip reads back as `env.clip` reads it and a
+    SkillEnv steps on it."""
+    from paramimic.envs.skill_env import SkillEnv
+
+    out = tmp_path / "my_walk.txt"
+    res = subprocess.run(
+        [sys.executable, "-m", "services.cli", "clip", "import", str(CMU_FILE), "--out", str(out),
+         "--start", "1", "--end", "4"],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "skeleton map 'cmu'" in res.stdout and out.is_file()
+    clip = registration("humanoid").load_clip(str(out))
+    assert clip.duration == pytest.approx(3.0, abs=0.04) and clip.loop == "none"
+    env = SkillEnv("humanoid", {}, {"clip": str(out)})
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape))
