@@ -137,6 +137,22 @@ def test_trim_rate_mirror_and_bad_input(tmp_path, cmu):
         import_bvh(CMU_FILE, skeleton=str(tmp_path / "map.yaml"))
     with pytest.raises(ValueError, match="keep no frames"):
         import_bvh(CMU_FILE, start=20.0)
+    text = CMU_FILE.read_text()
+    head, motion = text.split("MOTION")
+    lines = motion.strip().splitlines()
+    for name, body, words in (
+        ("zero", f"{head}MOTION\nFrames: 0\nFrame Time: .0083333\n", "Frame count \\(0\\)"),
+        ("slow", text.replace("Frame Time: .0083333", "Frame Time: 1e300"), "Frame Time"),
+        ("nan", "\n".join([head + "MOTION", *lines[:3], lines[3].replace("0.0000", "nan", 1),
+                           *lines[4:]]), "non-finite"),
+    ):  # fmt: skip
+        (tmp_path / f"{name}.bvh").write_text(body)
+        with pytest.raises(ValueError, match=words):
+            import_bvh(tmp_path / f"{name}.bvh")
+    legs_only = re.sub(r"\bLeftElbow\b", "LeftForearm", text)  # no map covers it
+    (tmp_path / "odd.bvh").write_text(legs_only)
+    with pytest.raises(ValueError, match="no skeleton map fits .*no joint LeftElbow"):
+        import_bvh(tmp_path / "odd.bvh")
 
 
 def test_paramimic_clip_import_writes_a_clip_that_trains(tmp_path):

@@ -43,6 +43,7 @@ ROLES = ("hips", "spine", "chest", "neck", "head") + tuple(
     for part in ("thigh", "knee", "ankle", "toe", "upper_arm", "elbow", "wrist")
 )
 STRAIGHT = np.radians(5.0)  # a limb bent less than this keeps its parent's twist
+MIN_FRAME_TIME, MAX_FRAME_TIME = 1.0 / 1000.0, 1.0  # s: motion capture runs at 1-1000 fps
 
 
 @dataclass(frozen=True)
@@ -225,9 +226,19 @@ def import_bvh(
     try:
         bvh = pybvh.read_bvh_file(str(path), world_up="+y" if up == "auto" else up,
                                   warn_on_world_up_disagreement=False)  # fmt: skip
-    except (OSError, ValueError, IndexError, KeyError) as e:
+    except (OSError, ValueError, IndexError, KeyError, TypeError) as e:
         raise ValueError(f"{path}: not a readable BVH file: {e}") from None
     source_fps, frame_count = float(bvh.fps), int(bvh.frame_count)
+    if frame_count < 2:
+        raise ValueError(f"{path}: {frame_count} frames; a clip needs at least 2")
+    if not 1.0 / MAX_FRAME_TIME <= source_fps <= 1.0 / MIN_FRAME_TIME:
+        raise ValueError(f"{path}: Frame Time {1 / source_fps:g} s is not a motion capture rate "
+                         f"({MIN_FRAME_TIME:g}-{MAX_FRAME_TIME:g} s)")  # fmt: skip
+    channels = np.concatenate([bvh.root_pos.ravel(), bvh.joint_angles.ravel()])
+    if not np.isfinite(channels).all():
+        bad = int(np.argmax(~np.isfinite(bvh.joint_angles).reshape(frame_count, -1).all(1)
+                            | ~np.isfinite(bvh.root_pos).all(1)))  # fmt: skip
+        raise ValueError(f"{path}: frame {bad} holds a non-finite channel value")
     first = 0 if start is None else int(round(start * source_fps))
     last = frame_count if end is None else min(frame_count, int(round(end * source_fps)) + 1)
     if not 0 <= first < last - 1:
