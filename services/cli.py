@@ -532,7 +532,9 @@ def clip_import(
     ] = None,
     up: Annotated[str, typer.Option(help="the file's up axis: auto, +y, +z, ...")] = "auto",
     mirror: Annotated[bool, typer.Option(help="swap left and right")] = False,
-    loop: Annotated[bool, typer.Option(help="mark the clip as looping (a gait cycle)")] = False,
+    loop: Annotated[
+        bool, typer.Option(help="find the best gait cycle in what is kept and close it into a loop")
+    ] = False,
 ) -> None:
     """Retarget a BVH file onto the humanoid and write it as a clip that `env.clip` (a skill)
     or `env.gait` (with --loop) trains on; says which skeleton map it chose and why, the
@@ -540,7 +542,7 @@ def clip_import(
     from paramimic.characters.bvh_import import import_bvh
 
     try:
-        imported = import_bvh(bvh, skeleton, start, end, fps, scale, up, mirror)
+        imported = import_bvh(bvh, skeleton, start, end, fps, scale, up, mirror, loop)
         text = imported.text("wrap" if loop else "none")
         imported.clip(out.stem, "wrap" if loop else "none")  # it reads back as env.clip does
     except (ValueError, KeyError) as e:
@@ -554,6 +556,10 @@ def clip_import(
     console.print(f"{report['frames']} frames, {report['seconds']:.2f} s at {fps:g} fps; "
                   f"lowest foot point {report['lowest_foot_min_m']:+.3f} m; feet on the "
                   f"ground in {100 * report['contact_share']:.0f} % of the frames")  # fmt: skip
+    if report["cycle"] is not None:
+        c = report["cycle"]
+        console.print(f"gait cycle {c['start_s']:.2f}-{c['end_s']:.2f} s, closed (its ends "
+                      f"differed by {c['residual_before_closing']:.3f})")  # fmt: skip
     console.print(f"wrote {out}")
 
 

@@ -173,3 +173,27 @@ def test_paramimic_clip_import_writes_a_clip_that_trains(tmp_path):
     env = SkillEnv("humanoid", {}, {"clip": str(out)})
     env.reset(seed=0)
     env.step(np.zeros(env.action_space.shape))
+
+
+def test_a_walk_becomes_a_gait_cycle_that_loops():
+    """`--loop`: the gait cycle whose ends are most alike (0.6-2.5 s) within the walking part,
+    its last pose made its first's, the root advancing: a [WL19] reference gait (`env.gait`)."""
+    from paramimic.characters.bvh_import import _pose_features
+    from paramimic.config import ExperimentConfig
+    from paramimic.envs import env_for
+
+    walk = import_bvh(CMU_FILE, start=1.5, end=6.5, loop=True)
+    cycle = walk.report["cycle"]
+    assert 0.6 <= cycle["end_s"] - cycle["start_s"] <= 2.5
+    features = _pose_features(walk.frames)
+    np.testing.assert_allclose(features[-1], features[0], atol=1e-9)
+    assert np.linalg.norm(walk.frames[-1, [1, 3]] - walk.frames[0, [1, 3]]) > 0.5  # it travels
+    clip = walk.clip("cmu_cycle", loop="wrap")
+    assert clip.loop == "wrap"
+    text = {"/tmp/cmu_cycle.txt": walk.text("wrap")}
+    cfg = ExperimentConfig.model_validate(
+        {"character": "humanoid", "env": {"gait": "/tmp/cmu_cycle.txt", "clip_texts": text}}
+    )
+    env = env_for(cfg)
+    assert 0.5 < env.clip_speed < 2.0  # m/s: a walk
+    env.reset(seed=0)

@@ -42,6 +42,10 @@ ROLES = ("hips", "spine", "chest", "neck", "head") + tuple(
     for side in SIDES
     for part in ("thigh", "knee", "ankle", "toe", "upper_arm", "elbow", "wrist")
 )
+# DeepMimic's joint columns after the root (paramimic/data/deepmimic/README.md)
+JOINT_COLUMNS = ("chest", "neck", "right_hip", "right_knee", "right_ankle", "right_shoulder",
+                 "right_elbow", "left_hip", "left_knee", "left_ankle", "left_shoulder",
+                 "left_elbow")  # fmt: skip
 STRAIGHT = np.radians(5.0)  # a limb bent less than this keeps its parent's twist
 MIN_FRAME_TIME, MAX_FRAME_TIME = 1.0 / 1000.0, 1.0  # s: motion capture runs at 1-1000 fps
 
@@ -212,11 +216,13 @@ def import_bvh(
     scale: float | None = None,
     up: str = "auto",
     mirror: bool = False,
+    loop: bool = False,
 ) -> Imported:
     """Read a BVH file and retarget it onto the humanoid (see the module's docstring).
     `scale`: metres per file unit (default: the humanoid's leg length over the source's);
     `up`: the file's up axis ('+y', '+z', ...; auto: pybvh's detection); `start`/`end`: the
-    seconds kept; `mirror`: left and right swapped."""
+    seconds kept; `mirror`: left and right swapped; `loop`: the best gait cycle in what is
+    kept, closed into a loop (`close_cycle`)."""
     import pybvh
 
     if up != "auto":
@@ -274,14 +280,23 @@ def import_bvh(
     contacts = _contacts(bvh, first, last, source_fps, fps, n)
     lift, lowest = _ground(frames, contacts)
     frames[:, 2] += lift
+    cycle = None
+    if loop:
+        a, b, residual = find_cycle(frames, fps)
+        frames, lowest, contacts = (
+            close_cycle(frames[a : b + 1]),
+            lowest[a : b + 1],
+            contacts[a : b + 1],
+        )
+        cycle = {"start_s": a / fps, "end_s": b / fps, "residual_before_closing": residual}
     report = {
         "file": str(path),
         "skeleton": chosen.name,
         "why": chosen.why,
         "source_fps": source_fps,
         "fps": fps,
-        "frames": n,
-        "seconds": (n - 1) / fps,
+        "frames": len(frames),
+        "seconds": (len(frames) - 1) / fps,
         "up_axis": up,
         "metres_per_unit": float(metres),
         "units_guess": _units(metres),
@@ -294,8 +309,64 @@ def import_bvh(
         # below the floor between them
         "lowest_foot_min_m": float(lowest.min()),
         "contact_share": float(contacts.mean()),
+        "cycle": cycle,
     }
     return Imported(frames, report)
+
+
+CYCLE_SECONDS = (0.6, 2.5)  # a gait cycle (two steps) lasts this long
+
+
+def _pose_features(frames: np.ndarray) -> np.ndarray:
+    """What a cycle's two ends must share: the joints' local rotations and angles, the root's
+    height and its tilt (its heading and position advance from cycle to cycle)."""
+    root = Rotation.from_quat(frames[:, 4:8], scalar_first=True)
+    yaw = Rotation.from_euler("y", root.as_euler("YZX")[:, :1])
+    tilt = (yaw.inv() * root).as_rotvec()
+    return np.column_stack([frames[:, 8:], frames[:, 2:3], tilt])
+
+
+def find_cycle(frames: np.ndarray, fps: float) -> tuple[int, int, float]:
+    """(first, last frame, pose distance) of the cycle whose two ends are most alike, lasting
+    CYCLE_SECONDS."""
+    features = _pose_features(frames)
+    lo, hi = (int(round(s * fps)) for s in CYCLE_SECONDS)
+    best = (0, 0, np.inf)
+    for a in range(len(frames) - lo):
+        ends = np.arange(a + lo, min(len(frames), a + hi + 1))
+        if not len(ends):
+            break
+        d = np.linalg.norm(features[ends] - features[a], axis=1)
+        k = int(np.argmin(d))
+        if d[k] < best[2]:
+            best = (a, int(ends[k]), float(d[k]))
+    if not np.isfinite(best[2]):
+        raise ValueError(f"--loop: the clip is shorter than a gait cycle ({CYCLE_SECONDS[0]} s)")
+    return best
+
+
+def close_cycle(frames: np.ndarray) -> np.ndarray:
+    """The cycle with its last frame's pose made its first's: the difference spread linearly
+    over the cycle (joint quaternions and angles, the root's height and tilt); the root's
+    heading and path keep advancing ("Loop": "wrap")."""
+    out = frames.copy()
+    u = np.linspace(0.0, 1.0, len(frames))[:, None]
+    out[:, 8:] += u * (frames[0, 8:] - frames[-1, 8:])
+    out[:, 2] += u[:, 0] * (frames[0, 2] - frames[-1, 2])
+    col = 8
+    for joint in JOINT_COLUMNS:
+        if joint.endswith(("knee", "elbow")):
+            col += 1
+            continue
+        out[:, col : col + 4] = _unit(out[:, col : col + 4])
+        col += 4
+    root = Rotation.from_quat(frames[:, 4:8], scalar_first=True)
+    yaw = Rotation.from_euler("y", root.as_euler("YZX")[:, :1])
+    tilt = yaw.inv() * root
+    residual = (tilt[0] * tilt[-1].inv()).as_rotvec()
+    fixed = yaw * Rotation.from_rotvec(u * residual) * tilt
+    out[:, 4:8] = _quat(fixed.as_matrix())
+    return out
 
 
 def _resample(positions: np.ndarray, source_fps: float, fps: float) -> np.ndarray:
@@ -355,9 +426,7 @@ def _humanoid_frames(P: dict, R0: dict, metres: float):
     frames[:, 1:4] = P["hips"] * metres
     frames[:, 4:8] = _quat(root)
     col = 8  # DeepMimic's column order (paramimic/data/deepmimic/README.md)
-    for joint in ("chest", "neck", "right_hip", "right_knee", "right_ankle", "right_shoulder",
-                  "right_elbow", "left_hip", "left_knee", "left_ankle", "left_shoulder",
-                  "left_elbow"):  # fmt: skip
+    for joint in JOINT_COLUMNS:
         if joint in hinge:
             frames[:, col] = hinge[joint]
             col += 1
