@@ -174,3 +174,55 @@ def test_damaged_latest_falls_back_and_old_files_are_pruned(tmp_path):
     checkpoint.save(tmp_path, state, 5, keep=2)
     assert not (d / ".tmp-stale.pt").exists()
     assert checkpoint.load(tmp_path)["progress"]["iteration"] == 3  # the state saved as ckpt 5
+
+
+def _rewrite_member(path: Path, edit) -> None:
+    """`path` rewritten as a valid zip archive whose tensor data member is `edit(bytes)`: the
+    damage a bit flip or a bad write leaves inside an archive that still opens."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as z:
+        members = {i.filename: z.read(i.filename) for i in z.infolist()}
+    data = max((n for n in members if "/data/" in n), key=lambda n: len(members[n]))
+    members[data] = edit(members[data])
+    path.unlink()
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as z:
+        for name, blob in members.items():
+            z.writestr(name, blob)
+
+
+def test_checkpoints_prove_themselves(tmp_path):
+    """A NaN written into the tensor data of a valid latest.pt is caught by its manifest, and
+    without the manifest by the finiteness check; either way the newest good file is used."""
+    _train(tmp_path, 3)
+    d = checkpoint.checkpoint_dir(tmp_path)
+    assert (d / "ckpt_000003.pt.sha256").is_file() and (d / "latest.pt.sha256").is_file()
+    latest = d / checkpoint.LATEST
+    nan = np.full(4, np.nan, np.float32).tobytes()
+    copy = latest.read_bytes()
+    latest.unlink()  # a hard link to ckpt_3: damage a copy
+    latest.write_bytes(copy)
+    _rewrite_member(latest, lambda b: nan + b[len(nan) :])
+    with pytest.warns(UserWarning, match="does not match its manifest"):
+        assert checkpoint.load(tmp_path)["progress"]["iteration"] == 3  # ckpt_3 is intact
+    (d / "latest.pt.sha256").unlink()  # no manifest: the NaN itself is found
+    (d / "ckpt_000003.pt").unlink()
+    with pytest.warns(UserWarning, match="non-finite value at /learner"):
+        assert checkpoint.load(tmp_path)["progress"]["iteration"] == 2
+    (d / "ckpt_000002.pt.sha256").unlink()  # a file of an older release: loads, with a warning
+    with pytest.warns(UserWarning, match="no manifest"):
+        assert checkpoint.read(d / "ckpt_000002.pt")["progress"]["iteration"] == 2
+
+
+def test_plain_non_finite_numbers_are_refused_and_pruning_counts_iterations(tmp_path):
+    trainer = _train(tmp_path, 1)
+    state = trainer.state_dict()
+    bad = state | {"marginal": state["marginal"] | {"mu": float("nan")}}
+    with pytest.raises(checkpoint.NonFiniteState, match="/marginal/mu"):
+        checkpoint.save(tmp_path, bad, 9)
+    for it in (999_999, 1_000_000, 1_000_001):  # as strings, 1_000_000 < 999_999
+        checkpoint.save(tmp_path, state, it, keep=2)
+    d = checkpoint.checkpoint_dir(tmp_path)
+    names = sorted(p.name for p in d.glob("ckpt_*.pt"))
+    assert names == ["ckpt_1000000.pt", "ckpt_1000001.pt"]
+    assert not (d / "ckpt_999999.pt.sha256").exists()

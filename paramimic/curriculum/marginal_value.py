@@ -35,6 +35,7 @@ class MarginalValue:
         self.mu: float | None = None  # set from the first batch, then updated as Alg. 1 l.26
         self.rng = np.random.default_rng(seed)
         self.fitted = False
+        self.skipped = 0  # minibatches with a non-finite loss or value, never applied
 
     def _scaled(self, a: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(self.space.scaled(a), dtype=torch.float32)
@@ -64,6 +65,9 @@ class MarginalValue:
             v = torch.as_tensor(values[idx], dtype=torch.float32)
             pred = self.net(self._scaled(tasks[idx])).squeeze(-1)
             loss = 0.5 * (pred - v).pow(2).mean()  # l.25: θ ← θ − α (1/n) Σ (V̄(a) − v) ∇V̄
+            if not torch.isfinite(loss) or not np.isfinite(values[idx]).all():
+                self.skipped += 1  # a non-finite batch never reaches V̄ or μ
+                continue
             self.opt.zero_grad()
             loss.backward()
             self.opt.step()

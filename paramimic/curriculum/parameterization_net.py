@@ -28,6 +28,7 @@ class ParameterizationNet:
         self.rng = np.random.default_rng(seed)
         self.version = 0  # bumped by every fit, so that actors know which P_θ they hold
         self.loss: float | None = None
+        self.skipped = 0  # minibatches with a non-finite loss, never applied
 
     def predict(self, a: np.ndarray) -> np.ndarray:
         """P_θ(a) for a batch [n, d] -> traces [n, T + 1, D + 1]."""
@@ -43,12 +44,15 @@ class ParameterizationNet:
         for _ in range(steps):
             idx = self.rng.integers(0, len(params), size=min(self.batch_size, len(params)))
             loss = (self.net(x_all[idx]) - y_all[idx]).pow(2).sum(dim=1).mean()  # Eq. 12
+            if not torch.isfinite(loss):
+                self.skipped += 1  # a non-finite elite trace never reaches P_θ
+                continue
             self.opt.zero_grad()
             loss.backward()
             self.opt.step()
             self.loss = loss.item()
         self.version += 1
-        return float(self.loss)
+        return float("nan") if self.loss is None else float(self.loss)
 
     @property
     def mse(self) -> float | None:

@@ -7,10 +7,18 @@ pickled object that would construct arbitrary classes or call functions, so a pl
 run code. Writes go to a temp file that is fsynced, renamed, and the directory fsynced;
 `latest.pt` is a hard link to the newest `ckpt_<iteration>.pt`. A checkpoint whose float tensors
 are not all finite is refused (`NonFiniteState`): a bad update never replaces a good file.
+
+Checkpoints prove themselves: beside each file a manifest (`<file>.sha256`: the SHA-256 of its
+bytes and its size) is written after the file's fsync, and reading a file checks it, and checks
+every float in it (tensors, arrays and plain numbers) for finiteness; a run's latest that fails
+either falls back to the newest ckpt_*.pt that passes both. A file written before manifests
+existed loads with a warning.
 """
 
 from __future__ import annotations
 
+import hashlib
+import math
 import os
 import pickle
 import tempfile
@@ -23,6 +31,7 @@ import numpy as np
 import torch
 
 LATEST = "latest.pt"
+WEIGHTS = ("learner", "marginal", "motion_net")  # the parts that must be finite
 SUFFIX = ".pt"
 TMP_PREFIX = ".tmp-"
 _TORCH_DTYPES = {np.dtype(t) for t in ("bool", "uint8", "int8", "int16", "int32", "int64",
@@ -82,6 +91,8 @@ def non_finite(value, where: str = "") -> str | None:
             return None if bool(torch.isfinite(value).all()) else where
         if isinstance(value, np.ndarray) and value.dtype.kind == "f":
             return None if bool(np.isfinite(value).all()) else where
+        if isinstance(value, float | np.floating):
+            return None if math.isfinite(value) else where
         return None
     for k, v in items:
         bad = non_finite(v, f"{where}/{k}")
@@ -96,7 +107,7 @@ def save(run_dir: Path, state: dict, iteration: int, keep: int | None = None) ->
     The networks' weights must be finite (`NonFiniteState` otherwise, nothing written); `keep`
     prunes all but the newest `keep` ckpt files; stale temp files of crashed writers go.
     """
-    bad = non_finite({k: state.get(k) for k in ("learner", "marginal", "motion_net")})
+    bad = non_finite({k: state.get(k) for k in WEIGHTS})
     if bad is not None:
         raise NonFiniteState(f"not writing checkpoint {iteration}: non-finite values at {bad}")
     d = checkpoint_dir(run_dir)
@@ -111,18 +122,68 @@ def save(run_dir: Path, state: dict, iteration: int, keep: int | None = None) ->
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        _write_manifest(path)
         latest_tmp = d / f"{TMP_PREFIX}latest-{os.getpid()}"
         latest_tmp.unlink(missing_ok=True)
         os.link(path, latest_tmp)
         os.replace(latest_tmp, d / LATEST)
+        _write_manifest(d / LATEST)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     _fsync_dir(d)
-    if keep is not None:
-        for old in sorted(d.glob("ckpt_*.pt"))[:-keep]:
+    if keep is not None:  # by iteration number (names sort as strings past 999,999)
+        for old in sorted(d.glob("ckpt_*.pt"), key=_iteration)[:-keep]:
             old.unlink(missing_ok=True)
+            _manifest(old).unlink(missing_ok=True)
     return path
+
+
+def _iteration(path: Path) -> int:
+    try:
+        return int(path.stem.split("_", 1)[1])
+    except (IndexError, ValueError):
+        return -1
+
+
+MANIFEST = ".sha256"
+
+
+def _manifest(path: Path) -> Path:
+    return path.with_name(path.name + MANIFEST)
+
+
+def _digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _write_manifest(path: Path) -> None:
+    """`<file>.sha256`: the digest and size of `path`, written atomically after its fsync."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=TMP_PREFIX, suffix=MANIFEST)
+    with os.fdopen(fd, "w") as f:
+        f.write(f"{_digest(path)} {path.stat().st_size}\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, _manifest(path))
+
+
+def verify(file: Path) -> bool:
+    """Whether `file` matches its manifest (False: it has none, a file of an older release);
+    CheckpointError if it does not match."""
+    manifest = _manifest(file)
+    if not manifest.is_file():
+        return False
+    try:
+        digest, size = manifest.read_text().split()
+    except (OSError, ValueError) as e:
+        raise CheckpointError(f"{file}: its manifest {manifest.name} is unreadable: {e}") from None
+    if file.stat().st_size != int(size) or _digest(file) != digest:
+        raise CheckpointError(f"{file} does not match its manifest (damaged after it was written)")
+    return True
 
 
 def _fsync_dir(d: Path) -> None:
@@ -174,6 +235,9 @@ def read(file: Path) -> dict:
     """One checkpoint file, loaded without running code (CheckpointError if unreadable)."""
     if not zipfile.is_zipfile(file):  # torch.save writes a zip archive; this is not one
         raise CheckpointError(f"{file} is damaged or truncated: not a torch checkpoint archive")
+    if not verify(file) and file.parent.name == "checkpoints":
+        warnings.warn(f"{file} has no manifest (written by an older release): not verified",
+                      stacklevel=3)  # fmt: skip
     try:
         state = torch.load(file, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
@@ -186,7 +250,11 @@ def read(file: Path) -> dict:
         raise CheckpointError(f"{file} is damaged or truncated: {e}") from None
     if not isinstance(state, dict):
         raise CheckpointError(f"{file} holds {type(state).__name__}, not a checkpoint dict")
-    return decode(state)
+    state = decode(state)
+    bad = non_finite({k: state.get(k) for k in WEIGHTS})
+    if bad is not None:
+        raise CheckpointError(f"{file} holds a non-finite value at {bad}")
+    return state
 
 
 def load(path: Path) -> dict:
@@ -199,7 +267,7 @@ def load(path: Path) -> dict:
     except CheckpointError as e:
         if file.name != LATEST or "not a plain-data checkpoint" in str(e):
             raise
-        for older in sorted(file.parent.glob("ckpt_*.pt"), reverse=True):
+        for older in sorted(file.parent.glob("ckpt_*.pt"), key=_iteration, reverse=True):
             try:
                 state = read(older)
             except CheckpointError:
@@ -210,7 +278,7 @@ def load(path: Path) -> dict:
 
 
 def upgrade(file: Path) -> Path:
-    """Rewrite a trusted checkpoint of the pre-Part-10 format (pickled numpy) as plain data.
+    """Rewrite a trusted checkpoint of the older format (pickled numpy) as plain data.
     Unpickles the file: use it only on files you made yourself."""
     file = resolve(file)
     state = torch.load(file, map_location="cpu", weights_only=False)
@@ -220,6 +288,7 @@ def upgrade(file: Path) -> Path:
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, file)  # in place: a run resumes from it
+    _write_manifest(file)
     _fsync_dir(file.parent)
     return file
 
