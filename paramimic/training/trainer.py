@@ -44,6 +44,11 @@ class StopRequested(Exception):
     before anything changed, and `train` ends as if the stop came between iterations."""
 
 
+class WriteRefused(RuntimeError):
+    """This trainer may no longer write its run (`train`'s `may_write` said no: on Ray, its
+    lease on the run is gone and another learner may own it)."""
+
+
 class TrainingDiverged(RuntimeError):
     """Updates kept producing non-finite losses or gradients; the run stopped with a checkpoint."""
 
@@ -318,15 +323,29 @@ class Trainer:
         should_stop: Callable[[], bool] = lambda: False,
         before_iteration: Callable[[], None] | None = None,
         on_checkpoint: Callable[..., None] | None = None,
+        may_write: Callable[[], bool] = lambda: True,
     ) -> None:
         """Iterate until `total_steps` env steps; checkpoint every K iterations and at the end.
 
         `before_iteration` may block (a paused run); `should_stop` is asked before and after it.
+        `may_write` is asked before every metrics row and checkpoint: False stops the run
+        (`WriteRefused`) without writing either, also on the way out.
         """
+        refused = False
+
+        def check_write() -> None:
+            nonlocal refused
+            if not may_write():
+                refused = True
+                raise WriteRefused(
+                    f"iteration {self.progress.iteration}: this learner may no longer write the "
+                    "run (its lease is gone); nothing more was written"
+                )
 
         def checkpoint_now(final: bool = False) -> None:
             """A periodic checkpoint that cannot be written (a full disk) is reported and
             training goes on (the last written one stands); the final one raises."""
+            check_write()
             try:
                 path = self.save_checkpoint()
             except OSError as e:
@@ -355,6 +374,7 @@ class Trainer:
                     m = self.iteration(backend)
                 except StopRequested:
                     break
+                check_write()
                 log.write(json.dumps(m) + "\n")
                 log.flush()
                 if on_metrics:
@@ -369,7 +389,9 @@ class Trainer:
                     checkpoint_now()
         finally:
             log.close()
-            if self._consistent:
+            if refused:
+                pass  # the run is no longer this learner's to write
+            elif self._consistent:
                 checkpoint_now(final=True)
             else:  # interrupted inside an update: the last checkpoint stands
                 logging.getLogger(__name__).warning(

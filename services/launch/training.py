@@ -23,7 +23,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from paramimic.config import ExperimentConfig, resume_conflicts
 from paramimic.training import checkpoint
-from paramimic.training.trainer import SerialBackend, Trainer, TrainingDiverged
+from paramimic.training.trainer import SerialBackend, Trainer, TrainingDiverged, WriteRefused
 from services.launch import reaper
 
 RUN_ID_FILE = "run_id"
@@ -198,6 +198,7 @@ def _stops() -> dict[type[Exception], tuple[int, str, str]]:
     """What ends a distributed run early: its exit code and what to say (Trainer.train writes
     a checkpoint on the way out in every case)."""
     from services.learner.ray_backend import AllActorsLost, FragmentsFailing, SamplerFailed
+    from services.learner.reporter import LeaseLost
 
     fix = "checkpoint saved, fix and --resume"
     return {
@@ -205,6 +206,16 @@ def _stops() -> dict[type[Exception], tuple[int, str, str]]:
         TrainingDiverged: (4, "stopped", "checkpoint saved"),
         FragmentsFailing: (5, "stopped (rollouts keep failing)", fix),
         SamplerFailed: (5, "stopped (sampler failed)", fix),
+        WriteRefused: (
+            6,
+            "stopped (lease lost)",
+            "nothing written after it; another learner may own the run",
+        ),
+        LeaseLost: (
+            6,
+            "stopped (lease lost)",
+            "nothing written after it; another learner may own the run",
+        ),
     }
 
 
@@ -318,7 +329,11 @@ class DistributedRun:
         if announced and not stop.set:
             reporter.set_status("running", "training resumed")
 
+    checkpointed: int | None = None  # the iteration of the last checkpoint written
+
     def on_checkpoint(self, path: Path | None, iteration: int, error: str | None = None) -> None:
+        if path is not None:
+            self.checkpointed = iteration
         if error is not None:
             self.reporter.event("checkpoint_failed", error, {"iteration": iteration})
             self.console.print(f"[yellow]{error}[/]")
@@ -362,10 +377,17 @@ class DistributedRun:
                     should_stop=lambda: stop.set,
                     before_iteration=self.before_iteration,
                     on_checkpoint=self.on_checkpoint,
+                    may_write=self.reporter.holds,
                 )
             status, code = ("stopped" if stop.set else "finished"), 0
         except tuple(stops) as e:
             code, what, then = stops[type(e)]
+            if (
+                then.startswith("checkpoint saved")
+                and self.checkpointed != trainer.progress.iteration
+            ):
+                then = (f"no final checkpoint (the last is iteration {self.checkpointed}); "
+                        "--resume continues from it")  # fmt: skip
             self.console.print(f"[bold red]{what}:[/] {e}; {then}")
         finally:
             if code == 1 and stop.set:  # interrupted by a second Ctrl-C

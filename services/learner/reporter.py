@@ -31,6 +31,11 @@ class RunOwned(RuntimeError):
     """Another learner holds the run's lease."""
 
 
+class LeaseLost(RuntimeError):
+    """This learner no longer holds the run's lease (it could not renew it in time, or another
+    learner took it): it must stop writing the run's keys and files."""
+
+
 # renew the lease only if it is still ours (another learner may have taken an expired one)
 _RENEW = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('expire', KEYS[1], ARGV[2]) else return 0 end"  # noqa: E501
 _RELEASE = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end"  # noqa: E501
@@ -56,8 +61,13 @@ class RunReporter:
         self.keys = RunKeys(run_id)
         self.redis = connect(redis_url, retry_seconds)
         self.restarts_seen = 0
+        # the owner string is also the fencing token: every write is conditioned on the lease
+        # still holding it, and a learner that takes the lease over has another one
         self.owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
         self._heartbeat: threading.Event | None = None
+        self.lease_seconds = LEASE_SECONDS
+        self._renewed = 0.0  # time.monotonic() of the last renewal that returned ours
+        self._lost = False
 
     def acquire(self, lease_seconds: int = LEASE_SECONDS) -> None:
         """Own the run: its lease key, set only if no live learner holds it, renewed every
@@ -78,16 +88,56 @@ class RunReporter:
             )
         else:
             raise RunOwned(f"run {self.keys.run_id}: could not take its lease")
+        self.lease_seconds, self._renewed, self._lost = lease_seconds, time.monotonic(), False
         stop = self._heartbeat = threading.Event()
 
         def beat() -> None:
             while not stop.wait(lease_seconds / 3):
                 try:
-                    self.redis.eval(_RENEW, 1, self.keys.lease, self.owner, lease_seconds)
-                except Exception:  # Redis away: the lease lapses, the run shows as stale
+                    ours = self.redis.eval(_RENEW, 1, self.keys.lease, self.owner, lease_seconds)
+                except Exception:  # Redis away: `holds` stops the writes past the deadline
                     continue
+                if ours:
+                    self._renewed = time.monotonic()
+                else:  # expired and taken, or deleted: never ours again
+                    self._lost = True
 
         threading.Thread(target=beat, name="run-lease", daemon=True).start()
+
+    def holds(self) -> bool:
+        """Whether this learner may still write the run (Kubernetes' leader-election rule): its
+        last renewal is younger than 2/3 of the lease. Past that, or if the lease was found
+        taken, it may take the lease back only if nobody else did meanwhile (it lapsed during a
+        Redis outage); otherwise it stops."""
+        if self._heartbeat is None:
+            return False
+        if not self._lost and time.monotonic() - self._renewed < self.lease_seconds * 2 / 3:
+            return True
+        if self._lost:
+            return False
+        try:
+            if self.redis.set(self.keys.lease, self.owner, nx=True, ex=self.lease_seconds) or (
+                self.redis.eval(_RENEW, 1, self.keys.lease, self.owner, self.lease_seconds)
+            ):
+                self._renewed = time.monotonic()
+                return True
+        except Exception:
+            return False
+        self._lost = True
+        return False
+
+    def _write(self, ops) -> None:
+        """`ops(pipe)` in one transaction that runs only while the lease holds this learner's
+        token (WATCH the lease, check it, MULTI): a learner that lost its lease writes nothing."""
+
+        def transaction(pipe) -> None:
+            if pipe.get(self.keys.lease) != self.owner:
+                self._lost = True
+                raise LeaseLost(f"run {self.keys.run_id}: the lease is no longer this learner's")
+            pipe.multi()
+            ops(pipe)
+
+        self.redis.transaction(transaction, self.keys.lease)
 
     def release(self) -> None:
         if self._heartbeat is not None:
@@ -102,7 +152,6 @@ class RunReporter:
         self.acquire()
         keys, now = self.keys, time.time()
         resumed = bool(self.redis.exists(keys.meta))
-        pipe = self.redis.pipeline(transaction=True)
         meta = {
             "name": cfg.name,
             "character": cfg.character,
@@ -115,15 +164,19 @@ class RunReporter:
             "api_url": api_url or "",
             "updated_at": now,
         }
-        if not resumed:
-            meta["started_at"] = now
-            pipe.zadd(RUNS, {keys.run_id: now})
-        pipe.hset(keys.meta, mapping=meta)
-        pipe.hset(keys.control, "paused", 0)
-        pipe.hdel(keys.control, "k")
         kind = "run_resumed" if resumed else "run_started"
-        add_event(pipe, keys, kind, f"{cfg.name}: training {'resumed' if resumed else 'started'}")
-        pipe.execute()
+
+        def ops(pipe) -> None:
+            if not resumed:
+                meta["started_at"] = now
+                pipe.zadd(RUNS, {keys.run_id: now})
+            pipe.hset(keys.meta, mapping=meta)
+            pipe.hset(keys.control, "paused", 0)
+            pipe.hdel(keys.control, "k")
+            message = f"{cfg.name}: training {'resumed' if resumed else 'started'}"
+            add_event(pipe, keys, kind, message)
+
+        self._write(ops)
 
     def progress(self, m: dict) -> None:
         """Progress and one history record per iteration, in one transaction. A resumed run
@@ -132,34 +185,37 @@ class RunReporter:
         record = finite(m)  # JSON has no NaN/inf: they become null
         fields = {k: dumps(record.get(k)) for k in PROGRESS_FIELDS}
         fields["updated_at"] = dumps(time.time())
-        pipe = self.redis.pipeline(transaction=True)
-        pipe.hset(keys.progress, mapping=fields)
-        pipe.hset(keys.meta, "updated_at", time.time())
-        pipe.zremrangebyscore(keys.history, it, "+inf")
-        pipe.zadd(keys.history, {dumps(record): it})
-        pipe.zremrangebyrank(keys.history, 0, -HISTORY_LIMIT - 1)
         restarts = int(m.get("actor_restarts", 0))
-        if restarts > self.restarts_seen:
-            add_event(
-                pipe,
-                keys,
-                "actor_restarted",
-                f"{restarts - self.restarts_seen} rollout actor(s) restarted; "
-                f"{m.get('dropped_fragments', 0)} fragment(s) dropped so far",
-                {"iteration": it, "actor_restarts": restarts},
-            )
-            self.restarts_seen = restarts
-        pipe.execute()
+
+        def ops(pipe) -> None:
+            pipe.hset(keys.progress, mapping=fields)
+            pipe.hset(keys.meta, "updated_at", time.time())
+            pipe.zremrangebyscore(keys.history, it, "+inf")
+            pipe.zadd(keys.history, {dumps(record): it})
+            pipe.zremrangebyrank(keys.history, 0, -HISTORY_LIMIT - 1)
+            if restarts > self.restarts_seen:
+                add_event(
+                    pipe,
+                    keys,
+                    "actor_restarted",
+                    f"{restarts - self.restarts_seen} rollout actor(s) restarted; "
+                    f"{m.get('dropped_fragments', 0)} fragment(s) dropped so far",
+                    {"iteration": it, "actor_restarts": restarts},
+                )
+
+        self._write(ops)
+        self.restarts_seen = max(self.restarts_seen, restarts)
 
     def event(self, kind: str, message: str, data: dict | None = None) -> None:
-        add_event(self.redis, self.keys, kind, message, data)
+        self._write(lambda pipe: add_event(pipe, self.keys, kind, message, data))
 
     def set_status(self, status: str, message: str | None = None) -> None:
-        pipe = self.redis.pipeline(transaction=True)
-        pipe.hset(self.keys.meta, mapping={"status": status, "updated_at": time.time()})
-        if message:
-            add_event(pipe, self.keys, f"run_{status}", message)
-        pipe.execute()
+        def ops(pipe) -> None:
+            pipe.hset(self.keys.meta, mapping={"status": status, "updated_at": time.time()})
+            if message:
+                add_event(pipe, self.keys, f"run_{status}", message)
+
+        self._write(ops)
 
     def take_control(self) -> tuple[bool, float | None]:
         """(paused, requested k or None); a k request is consumed by reading it."""

@@ -1,0 +1,78 @@
+"""One learner writes a run: its lease is its fencing token. A learner whose lease was taken
+over, or that could not renew it in time (a Redis outage longer than the lease), writes
+nothing more: no Redis key (every write is a transaction conditioned on the lease) and no
+metrics row or checkpoint in the run directory (the trainer asks `holds` first)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import redis
+from conftest import wait_until
+
+from paramimic.config import ExperimentConfig
+from paramimic.training.trainer import SerialBackend, Trainer, WriteRefused
+from services.keys import RunKeys
+from services.launch.redis_server import EmbeddedRedis
+from services.learner.reporter import LeaseLost, RunReporter
+
+CFG = {
+    "character": "hopper",
+    "task": {"leg_length": [0.9, 1.1], "target_velocity": [1.0, 1.0]},
+    "env": {"max_episode_seconds": 1.0},
+    "ppo": {"num_steps": 256, "minibatch_size": 64, "num_epochs": 1, "hidden_sizes": [16]},
+    "actors": {"num_envs": 2},
+    "train": {"checkpoint_every": 1},
+}
+
+
+def test_a_learner_whose_lease_was_taken_writes_nothing_more(redis_server, tmp_path):
+    cfg = ExperimentConfig.model_validate(CFG)
+    first = RunReporter(redis_server.url, "fenced")
+    first.acquire(lease_seconds=30)
+    first.start(cfg, tmp_path, 1000, None)
+    first.progress({"iteration": 1, "env_steps": 256})
+    keys = RunKeys("fenced")
+    r = redis.Redis.from_url(redis_server.url, decode_responses=True)
+    r.set(keys.lease, "elsewhere:1:beef", ex=30)  # the lease lapsed and another learner took it
+    with pytest.raises(LeaseLost):
+        first.progress({"iteration": 2, "env_steps": 512})
+    assert json.loads(r.hget(keys.progress, "iteration")) == 1
+    assert not first.holds()  # and it never takes the lease back from its new owner
+    with pytest.raises(LeaseLost):
+        first.event("checkpoint", "should not appear")
+    assert r.get(keys.lease) == "elsewhere:1:beef"
+    first.release()  # releasing leaves the new owner's lease alone
+    assert r.get(keys.lease) == "elsewhere:1:beef"
+
+
+def test_a_redis_outage_longer_than_the_lease_stops_the_writes(tmp_path):
+    """The learner cannot renew: past 2/3 of its lease it stops writing its run directory (the
+    trainer raises WriteRefused, no metrics row, no checkpoint, also none on the way out);
+    once Redis is back and nobody took the lease, it may take it again."""
+    server = EmbeddedRedis(tmp_path / "redis")
+    server.start()
+    try:
+        reporter = RunReporter(server.url, "outage", retry_seconds=1.0)
+        reporter.acquire(lease_seconds=3)
+        cfg = ExperimentConfig.model_validate(CFG | {"name": "outage"})
+        run = tmp_path / "run"
+        trainer = Trainer(cfg, run)
+        backend = SerialBackend(cfg, trainer.obs_dim, trainer.act_dim, trainer.curriculum)
+        trainer.train(backend, 2 * 256, may_write=reporter.holds)
+        rows = (run / "metrics.jsonl").read_text().splitlines()
+        checkpoints = sorted(p.name for p in (run / "checkpoints").glob("ckpt_*.pt"))
+        assert len(rows) == 2 and checkpoints == ["ckpt_000001.pt", "ckpt_000002.pt"]
+        server.stop()
+        wait_until(lambda: not reporter.holds(), 10, "the lease to lapse for this learner")
+        with pytest.raises(WriteRefused, match="may no longer write"):
+            trainer.train(backend, 6 * 256, may_write=reporter.holds)
+        assert (run / "metrics.jsonl").read_text().splitlines() == rows
+        assert sorted(p.name for p in (run / "checkpoints").glob("ckpt_*.pt")) == checkpoints
+        server.start()  # back, the lease expired and free: this learner takes it again
+        wait_until(reporter.holds, 20, "the learner to retake its free lease",
+                   retry_on=(redis.RedisError,))  # fmt: skip
+        backend.close()
+    finally:
+        server.stop()
