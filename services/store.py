@@ -66,6 +66,11 @@ class DeadlineRetry(Retry):
                 time.sleep(pause)
 
 
+class LeaseLost(RuntimeError):
+    """The run's learner no longer holds its lease (it could not renew it in time, or another
+    learner took it): its writes to the run's keys and files stop."""
+
+
 def connect(
     url: str,
     retry_seconds: float = 120.0,

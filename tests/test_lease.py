@@ -15,7 +15,8 @@ from paramimic.config import ExperimentConfig
 from paramimic.training.trainer import SerialBackend, Trainer, WriteRefused
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
-from services.learner.reporter import LeaseLost, RunReporter
+from services.learner.reporter import RunReporter
+from services.store import LeaseLost
 
 CFG = {
     "character": "hopper",
@@ -76,3 +77,23 @@ def test_a_redis_outage_longer_than_the_lease_stops_the_writes(tmp_path):
         backend.close()
     finally:
         server.stop()
+
+
+def test_the_sampler_writes_only_under_the_learners_lease(redis_server):
+    """The sampler actor's writes carry the learner's token too: once the lease is another
+    learner's, its commits are refused and the curriculum in Redis stays as it was."""
+    from paramimic.messages import EpisodeReport
+    from services.sampler.service import SamplerService
+
+    keys = RunKeys("fenced-sampler")
+    r = redis.Redis.from_url(redis_server.url, decode_responses=True)
+    r.set(keys.lease, "here:1:aaaa", ex=30)
+    cfg = ExperimentConfig.model_validate(CFG).model_dump(mode="json")
+    sampler = SamplerService(cfg, redis_server.url, "fenced-sampler", owner="here:1:aaaa")
+    deal = sampler.next_deal(4)
+    before = r.hget(keys.curriculum, "summary")
+    r.set(keys.lease, "elsewhere:2:bbbb", ex=30)
+    report = EpisodeReport("e1", deal.tasks[0], 1.0, 10, False, False, {}, False)
+    with pytest.raises(LeaseLost):
+        sampler.ingest([report])
+    assert r.hget(keys.curriculum, "summary") == before

@@ -30,14 +30,19 @@ class RayStack:
 
 @contextmanager
 def ray_stack(
-    cfg: ExperimentConfig, run_dir: Path, redis_url: str, run_id: str, actor_class=None
+    cfg: ExperimentConfig,
+    run_dir: Path,
+    redis_url: str,
+    run_id: str,
+    actor_class=None,
+    owner: str | None = None,
 ) -> Iterator[RayStack]:
     """Start the sampler and the rollout actors (`actor_class`: a Ray actor class with the
     RolloutActor interface, default RolloutActor; the fault tests inject through it); kill
     them on exit."""
     method = method_for(cfg)
     clip = method.spaces.clip_setup()  # what an [L21] curriculum needs of the clip
-    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id, clip)
+    sampler = start_sampler(cfg.model_dump(mode="json"), redis_url, run_id, clip, owner=owner)
     try:
         client = SamplerClient(sampler, cfg.actors.sampler_timeout)
         trainer = Trainer(cfg, run_dir, client, method)

@@ -198,7 +198,7 @@ def _stops() -> dict[type[Exception], tuple[int, str, str]]:
     """What ends a distributed run early: its exit code and what to say (Trainer.train writes
     a checkpoint on the way out in every case)."""
     from services.learner.ray_backend import AllActorsLost, FragmentsFailing, SamplerFailed
-    from services.learner.reporter import LeaseLost
+    from services.store import LeaseLost
 
     fix = "checkpoint saved, fix and --resume"
     return {
@@ -282,7 +282,9 @@ class DistributedRun:
         from services.launch.stack import ray_stack
 
         cfg, run_dir, state = self.run.cfg, self.run.run_dir, self.run.state
-        stack = self.services.enter_context(ray_stack(cfg, run_dir, self.redis_url, self.run_id))
+        stack = self.services.enter_context(
+            ray_stack(cfg, run_dir, self.redis_url, self.run_id, owner=self.reporter.owner)
+        )
         self.trainer, self.backend = stack.trainer, stack.backend
         self.backend.should_stop = lambda: self.stop.set  # SIGTERM honoured while it waits
         if state is not None:

@@ -13,7 +13,7 @@ from pathlib import Path
 from paramimic.characters import registration
 from paramimic.config import ExperimentConfig
 from services.keys import HISTORY_LIMIT, LEASE_SECONDS, RUNS, RunKeys
-from services.store import add_event, connect, dumps, finite
+from services.store import LeaseLost, add_event, connect, dumps, finite
 
 PROGRESS_FIELDS = (
     "iteration",
@@ -29,11 +29,6 @@ PROGRESS_FIELDS = (
 
 class RunOwned(RuntimeError):
     """Another learner holds the run's lease."""
-
-
-class LeaseLost(RuntimeError):
-    """This learner no longer holds the run's lease (it could not renew it in time, or another
-    learner took it): it must stop writing the run's keys and files."""
 
 
 # renew the lease only if it is still ours (another learner may have taken an expired one)

@@ -26,7 +26,7 @@ from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers
 from paramimic.training.method import method_for
 from services.keys import SAMPLES_LIMIT, RunKeys
-from services.store import add_event, connect, dumps
+from services.store import LeaseLost, add_event, connect, dumps
 
 RECENT_IDS = 4096  # ids re-added on a full rewrite (a restarted Redis may have lost the last ones)
 GRID_SIZE = 21  # points per display dimension of the V̄ and density snapshots
@@ -41,8 +41,11 @@ class SamplerService:
         restarted: bool = False,
         retry_seconds: float = 120.0,
         clip: dict | None = None,
+        owner: str | None = None,
     ) -> None:
-        # `clip`: the [L21] clip's trace shape and a0 (`Spaces.clip_setup` of the run's method)
+        # `clip`: the [L21] clip's trace shape and a0 (`Spaces.clip_setup` of the run's method);
+        # `owner`: the learner's lease token: each write runs only while the lease holds it
+        self.owner = owner
         cfg = ExperimentConfig.model_validate(config)
         self.curriculum = method_for(cfg).new_curriculum(clip)
         self.parts = self.curriculum.STATE_PARTS
@@ -85,31 +88,50 @@ class SamplerService:
             fields["updated_at"] = f"{time.time():.3f}"
             views = self.curriculum.views(wanted, GRID_SIZE)
             fields |= {name: dumps(view) for name, view in views.items()}
-            pipe = self.redis.pipeline(transaction=True)
-            for part in self.entry_parts:
-                self._write_entries(pipe, part, full)
-            pipe.hset(self.keys.curriculum, mapping=fields)
-            if full and self.recent_ids:
-                pipe.sadd(self.keys.seen, *self.recent_ids)
-            if ops is not None:
-                ops(pipe)
-            if event is not None:
-                add_event(pipe, self.keys, event[0], event[1], {"digest": self.digest()})
-            pipe.execute()
+            entries = {part: self._entries(part, full) for part in self.entry_parts}
+            digest = self.digest() if event is not None else None
+
+            def write(
+                pipe, full=full, fields=fields, entries=entries, ops=ops, event=event, digest=digest
+            ):
+                if self.owner is not None:  # fenced: only while the learner holds the lease
+                    if pipe.get(self.keys.lease) != self.owner:
+                        raise LeaseLost(f"run {self.keys.run_id}: the learner's lease is gone")
+                    pipe.multi()
+                for part, (added, removed) in entries.items():
+                    self._write_entries(pipe, part, full, added, removed)
+                pipe.hset(self.keys.curriculum, mapping=fields)
+                if full and self.recent_ids:
+                    pipe.sadd(self.keys.seen, *self.recent_ids)
+                if ops is not None:
+                    ops(pipe)
+                if event is not None:
+                    add_event(pipe, self.keys, event[0], event[1], {"digest": digest})
+
+            if self.owner is None:
+                pipe = self.redis.pipeline(transaction=True)
+                write(pipe)
+                pipe.execute()
+            else:
+                self.redis.transaction(write, self.keys.lease)
             if not self.rewrite_all or attempt:
                 return
             # the connection was re-established during execute: write the whole state once more
             # (`ops` and the event were applied already)
             ops, event = None, None
 
-    def _write_entries(self, pipe, part: str, full: bool) -> None:
+    def _entries(self, part: str, full: bool) -> tuple[dict, list]:
+        """(added, removed) of an entry-by-entry part since the last write: all of it on a
+        full rewrite."""
+        added, removed = self.curriculum.drain(part)
+        return (self.curriculum.entries(part), []) if full else (added, removed)
+
+    def _write_entries(self, pipe, part: str, full: bool, added: dict, removed: list) -> None:
         """An entry-by-entry part (the [L21] elites' traces) in its own hash: all of it on a
         full rewrite, else what changed since the last write."""
         key = self.keys.part(part)
-        added, removed = self.curriculum.drain(part)
         if full:
             pipe.delete(key)
-            added = self.curriculum.entries(part)
         elif removed:
             pipe.hdel(key, *removed)
         if added:
