@@ -586,6 +586,24 @@ def secret_problems(environ: dict, need: tuple[str, ...] = SECRETS) -> list[str]
     return problems
 
 
+@app.command("health")
+def health(
+    run_dir: Annotated[Path, typer.Argument(help="the run directory")],
+    max_age: Annotated[
+        float, typer.Option(help="seconds the learner may go without refreshing its liveness file")
+    ] = 600.0,
+) -> None:
+    """Exit 0 if a learner owns RUN_DIR and is moving (its liveness file is younger than
+    --max-age), else 1 with the reason: the healthcheck of a deployment's learner."""
+    from services.launch.liveness import problem
+
+    reason = problem(run_dir, max_age)
+    if reason is not None:
+        print(reason)  # one plain line: a healthcheck's log
+        raise typer.Exit(code=1)
+    print(f"{run_dir}: alive")
+
+
 @app.command("deploy-check")
 def deploy_check(
     env_file: Annotated[

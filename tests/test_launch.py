@@ -210,6 +210,12 @@ def test_one_command_run_with_api_control_stopped_by_sigterm(tmp_path):
         )
         held = c.get(f"/runs/{run}/progress").json()["iteration"]
         holds(lambda: c.get(f"/runs/{run}/progress").json()["iteration"] == held, 2.0, "pause")
+        # a paused learner is alive to its healthcheck: it owns the run and keeps moving
+        health = subprocess.run(
+            [sys.executable, "-m", "services.cli", "health", str(launch.run_dir), "--max-age",
+             "30"], capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert health.returncode == 0, health.stdout
         # k is applied while paused; resume goes on
         assert c.put(f"/runs/{run}/curriculum/k", json={"k": 0}, headers=auth).status_code == 202
         wait_until(

@@ -25,6 +25,7 @@ from paramimic.config import ExperimentConfig, resume_conflicts
 from paramimic.training import checkpoint
 from paramimic.training.trainer import SerialBackend, Trainer, TrainingDiverged, WriteRefused
 from services.launch import reaper
+from services.launch.liveness import LOCK_FILE, beat
 
 RUN_ID_FILE = "run_id"
 
@@ -138,9 +139,6 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
         console.print(f"checkpoint: {checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST}")
 
 
-LOCK_FILE = ".lock"
-
-
 def lock_run_dir(run_dir: Path):
     """An exclusive flock on the run directory: one learner per run dir. The kernel drops it
     when the process dies, even by SIGKILL. Returns the open lock file (close to release)."""
@@ -228,6 +226,7 @@ class DistributedRun:
         self.run, self.opts, self.api_port, self.services = run, opts, api_port, services
         self.console, self.stop = run.console, run.stop
         self.redis_url = opts.redis_url
+        self.embedded_redis = None
         self.api = None
         self.api_url: str | None = None
 
@@ -242,7 +241,7 @@ class DistributedRun:
 
         if self.redis_url is not None:
             return
-        server = EmbeddedRedis(self.run.run_dir / "redis")
+        server = self.embedded_redis = EmbeddedRedis(self.run.run_dir / "redis")
         self.redis_url = server.start()
         self.services.callback(server.stop)
         self.console.print(f"Redis: embedded, {masked(self.redis_url)}, AOF in {server.data_dir}")
@@ -327,6 +326,7 @@ class DistributedRun:
                 self.console.print("[yellow]paused (POST /runs/{run}/resume to go on)[/]")
                 announced = True
             time.sleep(0.5)  # the pause's poll of the control hash
+            self.supervise(self.trainer.progress.iteration)  # a paused run stays live
             paused, k = reporter.take_control()
         if announced and not stop.set:
             reporter.set_status("running", "training resumed")
@@ -349,16 +349,41 @@ class DistributedRun:
         for kind, message, data in self.backend.take_events():  # nodes lost and joined
             self.reporter.event(kind, message, {**data, "iteration": m["iteration"]})
             self.console.print(f"[yellow]{message}[/]")
-        self.keep_api_alive(m["iteration"])
+        self.supervise(m["iteration"])
 
     def keep_api_alive(self, iteration: int) -> None:
-        """The API died: start it again (on the same port)."""
+        """The API died: start it again (on the same port); a restart that fails is reported
+        and tried again at the next check, the run goes on."""
         if self.api is None or self.api.alive():
             return
-        self.api.start()
+        try:
+            self.api.start()
+        except Exception as e:
+            self.console.print(f"[yellow]the API process had exited and did not restart: {e}[/]")
+            return
         message = f"the API process had exited; restarted on {self.api.url}"
         self.reporter.event("api_restarted", message, {"iteration": iteration})
         self.console.print(f"[yellow]{message}[/]")
+
+    def keep_redis_alive(self) -> None:
+        """The embedded Redis died: start it again on its port and its AOF (the sampler and
+        the reporter reconnect; what it had flushed is kept)."""
+        server = self.embedded_redis
+        if server is None or server.process is None or server.process.poll() is None:
+            return
+        try:
+            server.start()
+        except RuntimeError as e:
+            self.console.print(f"[yellow]the embedded Redis exited and did not restart: {e}[/]")
+            return
+        self.console.print("[yellow]the embedded Redis had exited; restarted on its port[/]")
+
+    def supervise(self, iteration: int) -> None:
+        """What the loop refreshes and keeps up between iterations and while paused: the
+        liveness file, the embedded Redis, the API."""
+        beat(self.run.run_dir)
+        self.keep_redis_alive()
+        self.keep_api_alive(iteration)
 
     # --- the run --------------------------------------------------------------------------------
 
@@ -368,6 +393,7 @@ class DistributedRun:
                      self.start_stack, self.start_api):  # fmt: skip
             step()
         cfg, trainer, stop, stops = self.run.cfg, self.trainer, self.stop, _stops()
+        beat(self.run.run_dir)
         total, done = cfg.train.total_steps, trainer.progress.env_steps
         status, code = "failed", 1
         try:

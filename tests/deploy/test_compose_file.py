@@ -99,7 +99,8 @@ def test_healthchecks_test_the_service_and_the_learner_gets_time_to_checkpoint()
     assert "redis-cli ping" in " ".join(SERVICES["redis"]["healthcheck"]["test"])
     assert "/health" in " ".join(SERVICES["api"]["healthcheck"]["test"])
     assert "ray health-check" in " ".join(SERVICES["ray-head"]["healthcheck"]["test"])
-    assert ".lock" in " ".join(SERVICES["learner"]["healthcheck"]["test"])
+    learner = " ".join(SERVICES["learner"]["healthcheck"]["test"])
+    assert "paramimic health /runs/$$RUN_NAME" in learner
     grace = SERVICES["learner"]["stop_grace_period"]
     assert grace.endswith("s") and int(grace[:-1]) >= 60
 

@@ -1,0 +1,52 @@
+"""`paramimic health RUN_DIR`, the learner's healthcheck: alive only while a learner holds the
+run's lock and keeps refreshing its liveness file; a missing run directory, a free lock or a
+learner that stopped moving (hung inside an iteration) fail it."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+from conftest import wait_until
+
+from services.launch.liveness import HEARTBEAT, LOCK_FILE, beat
+
+
+def _health(run_dir, max_age=600):
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", "health", str(run_dir), "--max-age", str(max_age)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+
+
+def test_health_fails_unless_a_learner_holds_the_run_and_moves(tmp_path):
+    run = tmp_path / "run"
+    res = _health(run)
+    assert res.returncode == 1 and "no run directory" in res.stdout
+    run.mkdir()
+    (run / LOCK_FILE).touch()
+    res = _health(run)
+    assert res.returncode == 1 and "its lock is free" in res.stdout
+    holder = subprocess.Popen(  # a learner: holds the lock as the launcher does
+        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
+         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(600)",
+         str(run / LOCK_FILE)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        assert "no liveness file" in _health(run).stdout
+        beat(run)
+        res = _health(run)
+        assert res.returncode == 0 and "alive" in res.stdout
+        stale = time.time() - 900
+        os.utime(run / HEARTBEAT, (stale, stale))
+        (run / HEARTBEAT).write_text(f"{stale}\n")  # a learner hung for 15 minutes
+        res = _health(run, max_age=600)
+        assert res.returncode == 1 and "has not moved for 900 s" in res.stdout
+    finally:
+        holder.kill()
+        holder.wait()
+    wait_until(lambda: _health(run).returncode == 1, 30, "the lock to be free again")
