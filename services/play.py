@@ -20,6 +20,7 @@ import numpy as np
 from fastapi import FastAPI, HTTPException
 from fastapi.responses import FileResponse, StreamingResponse
 from pydantic import BaseModel
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from paramimic.config import TASK_GOALS, ExperimentConfig
 
@@ -207,7 +208,10 @@ def create_app(session: Session) -> FastAPI:
         yield
         session.stop.set()  # ends the MJPEG streams, so that shutdown does not wait for them
 
-    app = FastAPI(title="paramimic play", lifespan=lifespan)
+    app = FastAPI(title="paramimic play", lifespan=lifespan, docs_url=None, redoc_url=None)
+    # loopback only, and a Host header of loopback only: a web page elsewhere cannot drive it
+    # by rebinding its own name to 127.0.0.1
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=["127.0.0.1", "localhost", "::1"])
 
     def checked(f, *args):
         try:
@@ -223,6 +227,10 @@ def create_app(session: Session) -> FastAPI:
     @app.get("/static/play.js", include_in_schema=False)
     def script() -> FileResponse:
         return FileResponse(STATIC / "play.js", media_type="text/javascript")
+
+    @app.get("/static/common.js", include_in_schema=False)
+    def common() -> FileResponse:
+        return FileResponse(STATIC / "common.js", media_type="text/javascript")
 
     @app.get("/static/dashboard.css", include_in_schema=False)
     def style() -> FileResponse:

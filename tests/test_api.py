@@ -126,7 +126,7 @@ def test_every_read_endpoint(api, run):
         )
         after = c.get(f"/runs/{run}/events", params={"since": ev[-2]["id"]}).json()
         assert [e["type"] for e in after] == ["checkpoint"]
-        assert c.get("/docs").status_code == 200
+        assert c.get("/docs").status_code == 404  # no CDN scripts beside the dashboard's token
         assert "/runs/{run}/curriculum/marginal-value" in c.get("/openapi.json").json()["paths"]
 
 
@@ -308,3 +308,22 @@ def test_the_api_imports_neither_torch_nor_mujoco_nor_ray():
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_foreign_host_header_and_a_nan_body_get_4xx(api_url, redis_server, tmp_path):
+    """DNS rebinding: a request naming another host is refused before any route runs; a JSON
+    body holding NaN gets 422 with the NaN echoed as null (not 500)."""
+    from conftest import API_TOKEN
+
+    from services.learner.reporter import RunReporter
+
+    RunReporter(redis_server.url, "host-check").start(
+        ExperimentConfig.model_validate({"character": "hopper"}), tmp_path, 10, None
+    )
+    with httpx.Client(base_url=api_url, timeout=10.0) as c:
+        assert c.get("/runs").status_code == 200
+        assert c.get("/runs", headers={"Host": "evil.example:8000"}).status_code == 400
+        auth = {"Content-Type": "application/json", "Authorization": f"Bearer {API_TOKEN}"}
+        res = c.put("/runs/host-check/curriculum/k", content='{"k": NaN}', headers=auth)
+        assert res.status_code == 422, res.text
+        assert res.json()["detail"][0]["input"] is None

@@ -8,15 +8,18 @@ from contextlib import asynccontextmanager
 import redis.asyncio as aioredis
 import uvicorn
 from fastapi import FastAPI, Request
-from fastapi.exceptions import ResponseValidationError
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError, ResponseValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from services.api import dashboard
 from services.api.routes import router
 from services.api.settings import Settings
+from services.store import finite
 
 MAX_BODY = 4096  # bytes: the largest mutating request (PUT k) is ~20
 RETRY_AFTER = "5"  # seconds, on 503
@@ -85,6 +88,12 @@ class BodyLimit:
         await response({"type": "http"}, None, send)
 
 
+async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """422 with the errors; a NaN or Infinity the body held is echoed as null (JSON has no
+    NaN: FastAPI's own handler fails to encode it and answers 500)."""
+    return JSONResponse(status_code=422, content={"detail": finite(jsonable_encoder(exc.errors()))})
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
 
@@ -100,8 +109,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="paramimic",
         summary="Progress and curriculum state of paramimic training runs",
         lifespan=lifespan,
+        # no Swagger UI or ReDoc: they load scripts from a CDN into the origin that holds the
+        # dashboard's token; the schema stays at /openapi.json
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
+    app.add_exception_handler(RequestValidationError, invalid_request)
     app.include_router(router)
     app.include_router(dashboard.router)
     for error in (RedisConnectionError, RedisTimeoutError):
@@ -110,6 +124,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for error in damaged:
         app.add_exception_handler(error, damaged_state)
     app.add_middleware(BodyLimit)
+    # a Host header not ours (DNS rebinding: a page of another site resolving its own name to
+    # 127.0.0.1) is refused before any route runs
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.allowed_hosts)
     return app
 
 

@@ -1,4 +1,8 @@
 const POLL_MS = 2000;
+// every string from the server goes into HTML through this: a task parameter or an event
+// message is text, never markup
+const esc = v => String(v).replace(/[&<>"']/g, ch => ({"&": "&amp;", "<": "&lt;", ">": "&gt;",
+                                                      '"': "&quot;", "'": "&#39;"})[ch]);
 async function getJSON(url) {
   const r = await fetch(url);
   if (!r.ok) throw new Error(url + ": " + r.status);

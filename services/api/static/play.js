@@ -18,8 +18,8 @@ function sliders(s) {
     const kind = s.shape_params.includes(name) ? "body" : "goal";
     const label = document.createElement("label");
     const unit = (s.units || {})[name] || "";
-    label.innerHTML = `${name} <span class="muted">(${kind})</span> = ` +
-      `<b id="value-${name}">${s.task[name].toFixed(2)}</b> <span class="muted">${unit}</span>`;
+    label.innerHTML = `${esc(name)} <span class="muted">(${kind})</span> = ` +
+      `<b id="value-${esc(name)}">${s.task[name].toFixed(2)}</b> <span class="muted">${esc(unit)}</span>`;
     const input = document.createElement("input");
     Object.assign(input, {type: "range", id: "slider-" + name, min: lo, max: hi,
                           step: (hi - lo) / 100, value: s.task[name]});

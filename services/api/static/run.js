@@ -39,7 +39,6 @@ function curves() {
 }
 let PARAMS = {};  // name -> the run's task parameter (GET /runs/{run})
 const label = name => PARAMS[name] && PARAMS[name].unit ? `${name} (${PARAMS[name].unit})` : name;
-const esc = v => String(v).replace(/[&<>"]/g, ch => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"})[ch]);
 async function parameters() {
   const run = await getJSON(`/runs/${RUN}`);
   PARAMS = Object.fromEntries(run.parameters.map(p => [p.name, p]));
@@ -106,15 +105,15 @@ async function l21(c) {
 async function events() {
   const items = await getJSON(`/runs/${RUN}/events?limit=200`);
   const box = document.getElementById("events");
-  box.innerHTML = items.slice().reverse().map(e => `<div data-type="${e.type}">
-    ${new Date(e.time * 1000).toLocaleTimeString()} <b>${e.type}</b> ${e.message}</div>`).join("");
+  box.innerHTML = items.slice().reverse().map(e => `<div data-type="${esc(e.type)}">
+    ${new Date(e.time * 1000).toLocaleTimeString()} <b>${esc(e.type)}</b> ${esc(e.message)}</div>`).join("");
 }
 async function tick() {
   const p = await getJSON(`/runs/${RUN}/progress`);
   document.getElementById("title").textContent = RUN;
   const last = history.length ? history[history.length - 1] : {};
-  document.getElementById("status").innerHTML = `<span class="${p.status}" id="run-status">
-    ${p.status}</span> · iteration <span id="iteration">${p.iteration}</span> ·
+  document.getElementById("status").innerHTML = `<span class="${esc(p.status)}" id="run-status">
+    ${esc(p.status)}</span> · iteration <span id="iteration">${p.iteration}</span> ·
     ${fmt(p.env_steps, 0)} / ${fmt(p.total_steps, 0)} env steps · ${fmt(p.steps_per_second, 0)}
     steps/s · actors ${fmt(p.actors, 0)} on ${fmt(p.nodes, 0)} node(s) · restarts
     ${fmt(last.actor_restarts || 0, 0)} · updated ${ago(p.updated_at)}`;
