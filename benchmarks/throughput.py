@@ -256,8 +256,11 @@ def main() -> None:
     args.out.write_text(json.dumps(result, indent=2))
     for name, r in rows.items():
         value = r.get("steps_per_s", r.get("value"))
-        unit = "MB" if "rss" in name else "steps/s"
-        print(f"{name:30s} {value:10.0f} {unit}")
+        if isinstance(value, int | float):  # rows of other measures print their own way
+            unit = "MB" if "rss" in name else "steps/s"
+            print(f"{name:30s} {value:10.0f} {unit}")
+        else:
+            print(f"{name:30s} {r}")
     for name, v in ratios.items():
         print(f"{name:45s} {v:8.2f}")
     for path, peer in peers.items():

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -95,6 +97,7 @@ def train(
     from services.launch.training import LaunchError, LaunchOptions, run_training
     from services.store import with_password
 
+    _warn_secrets_on_argv()
     overrides = {
         k: v
         for k, v in {
@@ -135,6 +138,18 @@ def train(
         _fail(str(e))
     if code:
         raise typer.Exit(code=code)
+
+
+def _warn_secrets_on_argv() -> None:
+    """A token or a Redis password given on the command line is visible to every user of the
+    machine (`ps`); the environment variables carry them unseen."""
+    argv = " ".join(sys.argv)
+    if "--api-token" in argv:
+        console.print("[yellow]--api-token on the command line shows in `ps`: set "
+                      "PARAMIMIC_API_TOKEN instead[/]")  # fmt: skip
+    if re.search(r"--redis-url[ =]\S*://[^@\s]*:[^@\s]+@", argv):
+        console.print("[yellow]a password in --redis-url shows in `ps`: set REDIS_URL or "
+                      "REDIS_PASSWORD instead[/]")  # fmt: skip
 
 
 @app.command("api")
@@ -565,6 +580,7 @@ def clip_import(
 
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
+MIN_DISTINCT = 8  # 'aaaaaaaaaaaaaaaa' is 16 characters and no secret
 
 
 SECRETS = ("REDIS_PASSWORD", "RAY_AUTH_TOKEN")
@@ -572,7 +588,8 @@ SECRETS = ("REDIS_PASSWORD", "RAY_AUTH_TOKEN")
 
 def secret_problems(environ: dict, need: tuple[str, ...] = SECRETS) -> list[str]:
     """What is wrong with a deployment's secrets (`need` required; PARAMIMIC_API_TOKEN
-    optional): missing, a placeholder, or shorter than 16 characters."""
+    optional): missing, a placeholder, shorter than 16 characters or of fewer than 8 distinct
+    ones."""
     problems = []
     for name in (*need, "PARAMIMIC_API_TOKEN"):
         value = environ.get(name, "")
@@ -583,6 +600,9 @@ def secret_problems(environ: dict, need: tuple[str, ...] = SECRETS) -> list[str]
             problems.append(f"{name} is the placeholder {value!r}: set a random secret")
         elif len(value) < MIN_SECRET:
             problems.append(f"{name} is {len(value)} characters: use at least {MIN_SECRET}")
+        elif len(set(value)) < MIN_DISTINCT:
+            problems.append(f"{name} has {len(set(value))} distinct characters: set a random "
+                            f"secret (at least {MIN_DISTINCT})")  # fmt: skip
     return problems
 
 

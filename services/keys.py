@@ -17,7 +17,7 @@ paramimic:run:{run}:seen              set: ingested episode ids (idempotent inge
 paramimic:run:{run}:samples           list: the latest task batches (JSON), newest first
 paramimic:run:{run}:events            stream: type, message, data (JSON), time
 paramimic:run:{run}:control           hash: paused (0/1), k (requested uniformity)
-paramimic:run:{run}:lease             string: the owning learner (host:pid:nonce), with a TTL
+paramimic:run:{run}:lease             string: the owning learner (host:pid:start:nonce), with a TTL
                                       its heartbeat renews; gone = the learner is gone
 """
 

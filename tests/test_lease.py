@@ -97,3 +97,19 @@ def test_the_sampler_writes_only_under_the_learners_lease(redis_server):
     with pytest.raises(LeaseLost):
         sampler.ingest([report])
     assert r.hget(keys.curriculum, "summary") == before
+
+
+def test_a_lease_of_a_pid_now_another_process_is_dead():
+    """In a container the learner is pid 1 with the same hostname after every restart: the
+    owner also says when its process started, so a restarted learner sees its predecessor's
+    lease as dead instead of waiting for it to expire."""
+    import os
+    import socket
+
+    from services.learner.reporter import _dead_here, _process_start
+
+    me, pid = socket.gethostname(), os.getpid()
+    assert not _dead_here(f"{me}:{pid}:{_process_start(pid)}:abcd")  # this very process
+    assert _dead_here(f"{me}:{pid}:0000.1:abcd")  # the same pid, another process
+    assert not _dead_here(f"{me}:{pid}:abcd")  # an older release's owner: pid alive, not dead
+    assert not _dead_here(f"elsewhere:{pid}:0000.1:abcd")  # another machine: not ours to judge

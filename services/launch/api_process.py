@@ -28,6 +28,7 @@ class ApiProcess:
     def start(self, timeout: float = 60.0) -> str:
         env = os.environ | {"REDIS_URL": self.redis_url}
         env.pop("PARAMIMIC_API_TOKEN", None)
+        env.pop("RAY_AUTH_TOKEN", None)  # the API reads Redis only: it needs no Ray secret
         if self.token:
             env["PARAMIMIC_API_TOKEN"] = self.token  # not on the command line, where ps shows it
         self.log_path.parent.mkdir(parents=True, exist_ok=True)

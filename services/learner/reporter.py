@@ -36,10 +36,22 @@ _RENEW = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('expir
 _RELEASE = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end"  # noqa: E501
 
 
+def _process_start(pid: int) -> str | None:
+    """A process's identity beyond its pid: this boot's id and the process's start time in
+    clock ticks (/proc; None where there is no /proc). A restarted container's learner is pid
+    1 with the same hostname again, but started at another time."""
+    try:
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()[:8]
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return f"{boot}.{stat.rsplit(')', 1)[1].split()[19]}"  # field 22: starttime
+    except (OSError, IndexError):
+        return None
+
+
 def _dead_here(owner: str) -> bool:
-    """Whether a lease owner 'host:pid:nonce' was a process of this machine that is gone."""
-    host, _, rest = owner.partition(":")
-    pid = rest.partition(":")[0]
+    """Whether a lease owner 'host:pid:start:nonce' (or 'host:pid:nonce' of older releases) was
+    a process of this machine that is gone: no such pid, or a pid now another process's."""
+    host, pid, *rest = owner.split(":")
     if host != socket.gethostname() or not pid.isdigit():
         return False
     try:
@@ -48,6 +60,9 @@ def _dead_here(owner: str) -> bool:
         return True
     except PermissionError:  # alive, another user's
         return False
+    if len(rest) == 2:  # this release's owners say when their process started
+        started = _process_start(int(pid))
+        return started is not None and started != rest[0]
     return False
 
 
@@ -58,7 +73,8 @@ class RunReporter:
         self.restarts_seen = 0
         # the owner string is also the fencing token: every write is conditioned on the lease
         # still holding it, and a learner that takes the lease over has another one
-        self.owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
+        started = _process_start(os.getpid()) or "0"
+        self.owner = f"{socket.gethostname()}:{os.getpid()}:{started}:{secrets.token_hex(4)}"
         self._heartbeat: threading.Event | None = None
         self.lease_seconds = LEASE_SECONDS
         self._renewed = 0.0  # time.monotonic() of the last renewal that returned ours

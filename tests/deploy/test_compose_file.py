@@ -83,6 +83,9 @@ def test_placeholder_secrets_are_refused_before_anything_starts(tmp_path):
     res = _cli("deploy-check", env)
     assert res.returncode == 2 and "REDIS_PASSWORD is 5 characters" in res.stdout
     env.write_text("REDIS_PASSWORD=" + "b" * 24 + "\nRAY_AUTH_TOKEN=" + "a" * 32 + "\n")
+    res = _cli("deploy-check", env)  # long, and no secret
+    assert res.returncode == 2 and "REDIS_PASSWORD has 1 distinct characters" in res.stdout
+    env.write_text("REDIS_PASSWORD=Zq3vR8kLmW2xT5yB9nC4\nRAY_AUTH_TOKEN=a1b2c3d4e5f6a7b8c9d0e1f2\n")
     assert _cli("deploy-check", env).returncode == 0
     # the Redis container's own check, run by a real sh
     script = SERVICES["redis"]["command"][2].replace("$$", "$")
