@@ -66,6 +66,10 @@ def test_a_planted_checkpoint_is_refused_and_runs_nothing(tmp_path):
     assert p.returncode == 2, p.stderr
     assert "not a plain-data checkpoint" in p.stdout + p.stderr
     assert not marker.exists()
+    # and the converter the message names runs nothing either
+    with pytest.raises(checkpoint.CheckpointError, match="holds more than numpy arrays"):
+        checkpoint.upgrade(d / checkpoint.LATEST)
+    assert not marker.exists()
 
 
 def test_trained_state_round_trips_as_plain_data(tmp_path):

@@ -278,10 +278,15 @@ def load(path: Path) -> dict:
 
 
 def upgrade(file: Path) -> Path:
-    """Rewrite a trusted checkpoint of the older format (pickled numpy) as plain data.
-    Unpickles the file: use it only on files you made yourself."""
+    """Rewrite a checkpoint of the older format (pickled numpy) as plain data. It is read with
+    `weights_only` and only numpy's array and dtype constructors allowed, so a file that
+    would construct anything else is refused here too (CheckpointError)."""
     file = resolve(file)
-    state = torch.load(file, map_location="cpu", weights_only=False)
+    try:
+        with torch.serialization.safe_globals(_numpy_globals()):
+            state = torch.load(file, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        raise CheckpointError(f"{file} holds more than numpy arrays; not converted ({e})") from None
     fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=TMP_PREFIX, suffix=".pt")
     with os.fdopen(fd, "wb") as f:
         torch.save(encode(state), f)
@@ -291,6 +296,13 @@ def upgrade(file: Path) -> Path:
     _write_manifest(file)
     _fsync_dir(file.parent)
     return file
+
+
+def _numpy_globals() -> list:
+    """What unpickling numpy arrays and scalars needs, and nothing else."""
+    multiarray = np._core.multiarray if hasattr(np, "_core") else np.core.multiarray
+    dtypes = [type(np.dtype(t)) for t in _TORCH_DTYPES | {np.dtype("U1"), np.dtype("O")}]
+    return [multiarray._reconstruct, multiarray.scalar, np.ndarray, np.dtype, *dtypes]
 
 
 def load_policy(path: Path | str):
