@@ -273,7 +273,8 @@ def import_bvh(
     leg = np.mean([np.linalg.norm(R0[f"{s}_knee"] - R0[f"{s}_thigh"]) +
                    np.linalg.norm(R0[f"{s}_ankle"] - R0[f"{s}_knee"]) for s in SIDES])  # fmt: skip
     metres = BASE_LEG / leg if scale is None else scale
-    frames, flipped = _humanoid_frames(P, R0, metres)
+    leaves = _leaf_frames(bvh, chosen, first, last, fps, to_y_up, len(positions))
+    frames, flipped = _humanoid_frames(P, R0, metres, leaves)
     n = len(frames)
     frames[:, 0] = 1.0 / fps
     frames[-1, 0] = 0.0
@@ -396,8 +397,52 @@ def _units(metres_per_unit: float) -> str:
     return f"{metres_per_unit:.4g} m per unit (a skeleton of another size)"
 
 
-def _humanoid_frames(P: dict, R0: dict, metres: float):
-    """DeepMimic frames [F, 44] (durations left to the caller) from source joint positions."""
+LEAVES = ("neck", "right_ankle", "left_ankle")  # their twist is no bone's direction
+
+
+def _leaf_frames(bvh, chosen: SkeletonMap, first: int, last: int, fps: float, to_y_up, n: int):
+    """World frames [n, 3, 3] of the joints whose own twist positions cannot show (the neck
+    about the head's axis, the ankle about the foot's): the source joint's rotation from its
+    rest pose, which BVH defines as all angles zero, applied to the humanoid's rest frame
+    facing the source's rest forward (pybvh's `rest_forward`), resampled by slerp."""
+    from scipy.spatial.transform import Slerp
+
+    names = list(bvh.joint_names)
+    parent = {n.name: (n.parent.name if n.parent is not None else None) for n in bvh.nodes}
+    local = {}
+    for j, name in enumerate(names):
+        order = bvh.euler_orders[j].upper()  # BVH channels: intrinsic rotations in file order
+        local[name] = Rotation.from_euler(order, bvh.joint_angles[first:last, j])  # radians
+    world: dict[str, Rotation] = {}
+
+    def world_of(name: str) -> Rotation:
+        if name not in world:
+            up = parent[name]
+            world[name] = local[name] if up is None else world_of(up) * local[name]
+        return world[name]
+
+    forward = np.zeros(3)
+    axis = "xyz".index(bvh.rest_forward[-1])
+    forward[axis] = -1.0 if bvh.rest_forward.startswith("-") else 1.0
+    forward = to_y_up @ forward
+    forward = _unit(np.array([forward[0], 0.0, forward[2]]))
+    rest = _frame(forward, np.array([0.0, 1.0, 0.0]), np.cross(forward, [0.0, 1.0, 0.0]))
+    times = np.arange(last - first) / float(bvh.fps)
+    t = np.clip(np.arange(n) / fps, 0.0, times[-1])
+    out = {}
+    for role in LEAVES:
+        name = chosen.joints[role]
+        if name not in local:  # an end site: no rotation of its own
+            continue
+        delta = Slerp(times, world_of(name))(t).as_matrix()
+        out[role] = to_y_up @ delta @ to_y_up.T @ rest
+    return out
+
+
+def _humanoid_frames(P: dict, R0: dict, metres: float, leaves: dict | None = None):
+    """DeepMimic frames [F, 44] (durations left to the caller) from source joint positions
+    (`leaves`: world frames of the neck and ankles from the source's rotations, when known)."""
+    leaves = leaves or {}
     y_root = _unit(P["spine"] - P["hips"])
     z_root = _orth(P["right_thigh"] - P["left_thigh"], y_root)
     root = _frame(np.cross(y_root, z_root), y_root, z_root)
@@ -406,7 +451,7 @@ def _humanoid_frames(P: dict, R0: dict, metres: float):
     chest = _frame(np.cross(y_chest, z_chest), y_chest, z_chest)
     y_neck = _unit(P["head"] - P["neck"])
     z_neck = _orth(z_chest, y_neck)
-    neck = _frame(np.cross(y_neck, z_neck), y_neck, z_neck)
+    neck = leaves.get("neck", _frame(np.cross(y_neck, z_neck), y_neck, z_neck))
     local = {"chest": _local(root, chest), "neck": _local(chest, neck)}
     hinge, flipped = {}, {}
     for side in SIDES:
@@ -414,7 +459,9 @@ def _humanoid_frames(P: dict, R0: dict, metres: float):
             P[f"{side}_thigh"], P[f"{side}_knee"], P[f"{side}_ankle"], root, -1.0
         )
         shin = thigh @ _rz(knee)
-        foot = _foot(P[f"{side}_ankle"], P[f"{side}_toe"], shin, R0, side)
+        foot = leaves.get(f"{side}_ankle")
+        if foot is None:
+            foot = _foot(P[f"{side}_ankle"], P[f"{side}_toe"], shin, R0, side)
         arm, elbow, flipped[f"{side}_elbow"] = _limb(
             P[f"{side}_upper_arm"], P[f"{side}_elbow"], P[f"{side}_wrist"], chest, 1.0
         )
