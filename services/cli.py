@@ -578,6 +578,23 @@ def clip_import(
     console.print(f"wrote {out}")
 
 
+@clip_app.command("export")
+def clip_export(
+    clip: Annotated[str, typer.Argument(help="a humanoid clip file or a built-in clip name")],
+    bvh: Annotated[Path, typer.Option(help="the BVH file to write")],
+) -> None:
+    """Write a humanoid clip as BVH motion capture of the humanoid's own skeleton (metres, Y
+    up), which `paramimic clip import` reads back."""
+    from paramimic.characters.bvh_import import clip_frames, export_bvh
+
+    try:
+        frames = clip_frames(clip)
+    except (ValueError, KeyError, OSError) as e:
+        _fail(str(e))
+    export_bvh(frames, bvh)
+    console.print(f"wrote {bvh}: {len(frames)} frames of {clip}")
+
+
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
 MIN_DISTINCT = 8  # 'aaaaaaaaaaaaaaaa' is 16 characters and no secret

@@ -89,7 +89,16 @@ LAFAN1 = SkeletonMap("lafan1", _sided(
     _limbs("", "Right", ("UpLeg", "Leg", "Foot", "Toe", "Arm", "ForeArm", "Hand")),
     {"hips": "Hips", "spine": "Spine", "chest": "Spine2", "neck": "Neck", "head": "Head"},
 ))  # fmt: skip
-MAPS = (CMU, MIXAMO, LAFAN1)
+# the humanoid's own skeleton, as `export_bvh` writes it
+DEEPMIMIC = SkeletonMap("deepmimic", _sided(
+    {"thigh": "left_hip", "knee": "left_knee", "ankle": "left_ankle", "toe": "EndSiteleft_ankle",
+     "upper_arm": "left_shoulder", "elbow": "left_elbow", "wrist": "left_wrist"},
+    {"thigh": "right_hip", "knee": "right_knee", "ankle": "right_ankle",
+     "toe": "EndSiteright_ankle", "upper_arm": "right_shoulder", "elbow": "right_elbow",
+     "wrist": "right_wrist"},
+    {"hips": "root", "spine": "chest", "chest": "chest", "neck": "neck", "head": "EndSiteneck"},
+))  # fmt: skip
+MAPS = (CMU, MIXAMO, LAFAN1, DEEPMIMIC)
 
 
 def _chains_fit(joints: dict[str, str], parent: dict[str, str | None]) -> bool:
@@ -168,10 +177,10 @@ def _limb(base: np.ndarray, mid: np.ndarray, end: np.ndarray, parent: np.ndarray
     """(frame [F, 3, 3], hinge angle [F], projection error [F] in rad) of a two-bone limb: the
     upper bone along -y, twisted so that the lower bone lies in the x-y plane (the hinge's),
     bending to `bend` x (+1: forward, an elbow; -1: backward, a knee). A limb nearly straight
-    (< STRAIGHT) or bent against its hinge has no twist against its `parent`'s frame ([F, 3, 3]:
-    the parent's +x swung with the bone from the parent's -y) and its lower bone is projected
-    onto the hinge's plane and range: the angle between the source's lower bone and the
-    projection is the error."""
+    (< STRAIGHT) or bent against its hinge takes its twist (measured from its `parent`'s frame
+    [F, 3, 3], the parent's +x swung with the bone from the parent's -y) from the neighbouring
+    frames, and its lower bone is projected onto the hinge's plane and range: the angle between
+    the source's lower bone and the projection is the error."""
     d1, d2 = mid - base, end - mid
     axis = _unit(d1)
     y = -axis
@@ -180,7 +189,17 @@ def _limb(base: np.ndarray, mid: np.ndarray, end: np.ndarray, parent: np.ndarray
     x_bent = _unit(perp) * bend  # the lower bone goes toward +x for an elbow, -x for a knee
     fallback = _orth(_swing(parent[..., 0], -parent[..., 1], axis), y)
     usable = (angle > STRAIGHT) & ((x_bent * fallback).sum(-1) > -0.5)
-    x = _orth(np.where(usable[:, None], x_bent, fallback), y)
+    # the twist about the upper bone: where the limb bends, the one that puts the lower bone
+    # in the hinge's plane; where it is straight (or bent the wrong way) the positions cannot
+    # show it, and it is interpolated in time from the frames where they do
+    side = np.cross(y, fallback)
+    twist = np.arctan2((x_bent * side).sum(-1), (x_bent * fallback).sum(-1))
+    if usable.any():
+        k = np.arange(len(twist))
+        twist = np.interp(k, k[usable], np.unwrap(twist[usable]))
+    else:
+        twist = np.zeros(len(twist))
+    x = _orth(np.cos(twist)[:, None] * fallback + np.sin(twist)[:, None] * side, y)
     z = np.cross(x, y)
     lower = _unit(d2)
     u, v = (lower * x).sum(-1), (lower * y).sum(-1)
@@ -217,12 +236,13 @@ def import_bvh(
     up: str = "auto",
     mirror: bool = False,
     loop: bool = False,
+    ground: bool = True,
 ) -> Imported:
     """Read a BVH file and retarget it onto the humanoid (see the module's docstring).
     `scale`: metres per file unit (default: the humanoid's leg length over the source's);
     `up`: the file's up axis ('+y', '+z', ...; auto: pybvh's detection); `start`/`end`: the
     seconds kept; `mirror`: left and right swapped; `loop`: the best gait cycle in what is
-    kept, closed into a loop (`close_cycle`)."""
+    kept, closed into a loop (`close_cycle`); `ground`: the feet moved onto the floor."""
     import pybvh
 
     if up != "auto":
@@ -278,9 +298,13 @@ def import_bvh(
     n = len(frames)
     frames[:, 0] = 1.0 / fps
     frames[-1, 0] = 0.0
-    contacts = _contacts(bvh, first, last, source_fps, fps, n)
+    feet = [chosen.joints[f"{side}_ankle"] for side in SIDES]
+    contacts = _contacts(bvh, feet, first, last, source_fps, fps, n)
     lift, lowest = _ground(frames, contacts)
-    frames[:, 2] += lift
+    if ground:
+        frames[:, 2] += lift
+    else:
+        lowest -= lift
     cycle = None
     if loop:
         a, b, residual = find_cycle(frames, fps)
@@ -520,9 +544,10 @@ def _foot(ankle: np.ndarray, toe: np.ndarray, shin: np.ndarray, R0: dict, side: 
     return _frame(x, y, z) @ Rotation.from_euler("z", -pitch).as_matrix()
 
 
-def _contacts(bvh, first: int, last: int, source_fps: float, fps: float, n: int) -> np.ndarray:
-    """Frames (at `fps`) where a foot of the source is on the ground (pybvh's detection)."""
-    labels = np.asarray(bvh.foot_contacts())[first:last]  # [F, feet]
+def _contacts(bvh, feet, first: int, last: int, source_fps: float, fps: float, n: int):
+    """Frames (at `fps`) where a foot of the source is on the ground (pybvh's detection from
+    the `feet` joints' height and speed)."""
+    labels = np.asarray(bvh.foot_contacts(foot_joints=feet))[first:last]  # [F, feet]
     on = labels.reshape(len(labels), -1).max(axis=1) > 0.5
     t = np.arange(n) / fps
     return np.interp(t, np.arange(len(on)) / source_fps, on.astype(float)) > 0.5
@@ -547,3 +572,96 @@ def _ground(frames: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, np.nd
     else:
         lift = np.full(len(lowest), -np.median(lowest))
     return lift, lowest + lift
+
+
+# end sites of the exported skeleton (m, in the parent joint's frame): the head's top, the
+# foot's toe (its box's front, at the sole's height), the hand
+_END_SITES = {"neck": (0.0, 0.25, 0.0), "right_ankle": (0.1335, -0.05, 0.0),
+              "left_ankle": (0.1335, -0.05, 0.0), "right_wrist": (0.0, -0.1, 0.0),
+              "left_wrist": (0.0, -0.1, 0.0)}  # fmt: skip
+
+
+def clip_frames(clip: str) -> np.ndarray:
+    """The DeepMimic frames [n, 44] of a humanoid clip: a built-in name (humanoid_walk, ...) or
+    a clip file, checked as `env.clip` reads it."""
+    from paramimic.characters.humanoid import CLIPS, DATA
+
+    name = clip.removeprefix("humanoid_")
+    path = DATA / f"humanoid3d_{CLIPS[name]}.txt" if name in CLIPS else Path(clip)
+    text = path.read_text()
+    load_deepmimic(Path(str(path)), text=text)  # it parses as a clip
+    return np.asarray(json.loads(text)["Frames"], np.float64)
+
+
+def export_bvh(frames: np.ndarray, path: str | Path) -> Path:
+    """DeepMimic humanoid frames [n, 44] (durations, root, local joint rotations; Y up, metres)
+    as a BVH file of the humanoid's own skeleton: ZYX rotation channels in degrees, the knees'
+    and elbows' hinge on Z, the same frame rate (the first frame's duration)."""
+    skeleton = HUMANOID.skeleton
+    children: dict[int, list[dict]] = {}
+    for j in skeleton:
+        children.setdefault(j["Parent"], []).append(j)
+    lines = ["HIERARCHY"]
+
+    def write(j: dict, depth: int) -> None:
+        pad = "\t" * depth
+        kind = "ROOT" if j["Parent"] < 0 else "JOINT"
+        lines.append(f"{pad}{kind} {j['Name']}")
+        lines.append(pad + "{")
+        lines.append(f"{pad}\tOFFSET {j['AttachX']:.6f} {j['AttachY']:.6f} {j['AttachZ']:.6f}")
+        position = "Xposition Yposition Zposition " if j["Parent"] < 0 else ""
+        count = 6 if j["Parent"] < 0 else 3
+        lines.append(f"{pad}\tCHANNELS {count} {position}Zrotation Yrotation Xrotation")
+        for child in children.get(j["ID"], []):
+            write(child, depth + 1)
+        if j["Name"] in _END_SITES:
+            x, y, z = _END_SITES[j["Name"]]
+            end = [f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {x} {y} {z}", pad + "\t}"]
+            lines.extend(end)
+        lines.append(pad + "}")
+
+    write(skeleton[0], 0)
+    order = [j["Name"] for j in _preorder(skeleton, children)]
+    columns = _columns()
+    rows = []
+    for f in frames:
+        values = list(f[1:4])
+        for name in order:
+            if name == "root":
+                q = f[4:8]
+            elif name in columns:
+                start, width = columns[name]
+                q = None if width == 1 else f[start : start + 4]
+                if q is None:
+                    values += [float(np.degrees(f[start])), 0.0, 0.0]
+                    continue
+            else:  # the wrists: fixed
+                values += [0.0, 0.0, 0.0]
+                continue
+            zyx = Rotation.from_quat(q, scalar_first=True).as_euler("ZYX", degrees=True)
+            values += list(zyx)
+        rows.append(" ".join(f"{v:.6f}" for v in values))
+    frame_time = float(frames[0, 0])
+    lines += ["MOTION", f"Frames: {len(rows)}", f"Frame Time: {frame_time:.8f}", *rows]
+    path = Path(path)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _preorder(skeleton: list[dict], children: dict[int, list[dict]]) -> list[dict]:
+    out, stack = [], [skeleton[0]]
+    while stack:
+        j = stack.pop()
+        out.append(j)
+        stack.extend(reversed(children.get(j["ID"], [])))
+    return out
+
+
+def _columns() -> dict[str, tuple[int, int]]:
+    """DeepMimic frame columns of each joint: (first column, 4 for a quaternion or 1)."""
+    out, col = {}, 8
+    for joint in JOINT_COLUMNS:
+        width = 1 if joint.endswith(("knee", "elbow")) else 4
+        out[joint] = (col, width)
+        col += width
+    return out
