@@ -139,10 +139,11 @@ def evaluate_skill(run: Path, tries: int) -> dict:
     from paramimic.envs.skill_env import SkillEnv
     from paramimic.evaluation import deterministic
     from paramimic.motion.measures import com_rise, rotation_steps
+    from paramimic.training.method import L21, method_for
 
     state, cfg, policy = load_run(run)
-    if cfg.env.clip is None:
-        raise SystemExit(f"{run}: not a skill run (env.clip unset)")
+    if not isinstance(method_for(cfg), L21):
+        raise SystemExit(f"{run}: not an [L21] skill run (env.clip unset)")
     act = deterministic(policy)
     env_cfg = cfg.env.for_evaluation()
     env_cfg = env_cfg.model_copy(
