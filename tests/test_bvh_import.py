@@ -8,14 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import pybvh
 import pytest
 
 from paramimic.characters import registration
-from paramimic.characters.bvh_import import import_bvh
-from paramimic.characters.humanoid import HUMANOID
+from paramimic.characters.bvh_import import import_bvh, kinematics
 from paramimic.motion.clip import Y_UP_TO_Z_UP
 
 CMU_FILE = (
@@ -43,26 +41,12 @@ def cmu():
     return import_bvh(CMU_FILE)
 
 
-def _world(imported):
-    """The humanoid's body positions [F, bodies, 3] playing the imported clip (MuJoCo)."""
-    clip = imported.clip("imported")
-    body = HUMANOID.compile()
-    qpos = HUMANOID.pose_qpos(body, clip.sample(np.arange(len(imported.frames)) / 30.0))
-    data = mujoco.MjData(body.model)
-    out = []
-    for q in qpos:
-        data.qpos[:] = q
-        mujoco.mj_kinematics(body.model, data)
-        out.append(data.xpos.copy())
-    return body, np.array(out)
-
-
 def test_the_cmu_file_is_read_mapped_and_its_bones_followed(cmu):
     report = cmu.report
     assert report["skeleton"] == "cmu" and "chains" in report["why"]
     assert report["units_guess"] == "CMU's units (1/0.45 inch)" and report["up_axis"] == "+y"
     assert report["fps"] == 30.0 and report["frames"] == 249  # 8.27 s at 120 fps, resampled
-    body, xpos = _world(cmu)
+    body, xpos, _ = kinematics(cmu.frames)
     source = pybvh.read_bvh_file(str(CMU_FILE)).resample(30.0)
     names = [n.name for n in source.nodes]
     positions = source.node_positions() @ Y_UP_TO_Z_UP.as_matrix().T
@@ -85,16 +69,8 @@ def test_the_cmu_file_is_read_mapped_and_its_bones_followed(cmu):
 def test_the_feet_meet_the_floor(cmu):
     """No sinking, no floating: the lowest foot point is on the floor whenever the source
     stands, and not more than 3 cm below it in between."""
-    body = HUMANOID.compile()
-    clip = cmu.clip("imported")
-    qpos = HUMANOID.pose_qpos(body, clip.sample(np.arange(len(cmu.frames)) / 30.0))
-    data = mujoco.MjData(body.model)
-    lowest = []
-    for q in qpos:
-        data.qpos[:] = q
-        mujoco.mj_kinematics(body.model, data)
-        lowest.append(data.site_xpos[body.contact_site_ids, 2].min())
-    lowest = np.array(lowest)
+    body, _, sites = kinematics(cmu.frames)
+    lowest = sites[:, body.contact_site_ids, 2].min(axis=1)
     assert lowest.min() > -0.03 and np.median(np.abs(lowest)) < 0.01
     assert cmu.report["lowest_foot_min_m"] == pytest.approx(lowest.min(), abs=1e-6)
 

@@ -553,19 +553,28 @@ def _contacts(bvh, feet, first: int, last: int, source_fps: float, fps: float, n
     return np.interp(t, np.arange(len(on)) / source_fps, on.astype(float)) > 0.5
 
 
+def kinematics(frames: np.ndarray):
+    """(the base humanoid, body positions [F, bodies, 3], site positions [F, sites, 3]) of
+    DeepMimic frames played on the humanoid, from MuJoCo's kinematics (world: z up)."""
+    clip = load_deepmimic(Path("frames.txt"), text=json.dumps({"Frames": frames.tolist()}))
+    body = HUMANOID.compile()
+    qpos = HUMANOID.pose_qpos(body, clip.sample(np.cumsum(np.r_[0.0, clip.durations[:-1]])))
+    data = mujoco.MjData(body.model)
+    xpos, sites = [], []
+    for q in qpos:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(body.model, data)
+        xpos.append(data.xpos.copy())
+        sites.append(data.site_xpos.copy())
+    return body, np.array(xpos), np.array(sites)
+
+
 def _ground(frames: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The vertical offset [F] that puts the humanoid's lowest foot point on the floor at every
     contact frame (interpolated between them; the median where the source never stands), and
     the lowest foot point after it."""
-    clip = load_deepmimic(Path("bvh.txt"), text=json.dumps({"Frames": frames.tolist()}))
-    body = HUMANOID.compile()
-    qpos = HUMANOID.pose_qpos(body, clip.sample(np.cumsum(np.r_[0.0, clip.durations[:-1]])))
-    data = mujoco.MjData(body.model)
-    lowest = np.zeros(len(qpos))
-    for k, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(body.model, data)
-        lowest[k] = data.site_xpos[body.contact_site_ids, 2].min()
+    body, _, sites = kinematics(frames)
+    lowest = sites[:, body.contact_site_ids, 2].min(axis=1)
     t = np.arange(len(lowest))
     if contacts.any():
         lift = np.interp(t, t[contacts], -lowest[contacts])
