@@ -104,6 +104,8 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
     from paramimic.training.trainer import SerialBackend, Trainer
     from services.play import Session, create_app
 
+    LOOPBACK = "http://127.0.0.1"  # play answers loopback Host headers only
+
     def trained(config: str, overrides: dict):
         cfg = load_config(ROOT / config, overrides | {"train.run_dir": str(tmp_path / config)})
         trainer = Trainer(cfg, tmp_path / config)
@@ -114,7 +116,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     small = {"ppo.num_steps": 256, "ppo.minibatch_size": 128, "actors.num_envs": 4}
     skill = Session(*trained("configs/walker_jump.yaml", small))
-    with TestClient(create_app(skill)) as client:
+    with TestClient(create_app(skill), base_url=LOOPBACK) as client:
         state = client.get("/state").json()
         assert state["kind"] == "skill" and set(state["task"]) == {"gravity", "jump_height"}
         assert state["goals"] == ["gravity", "jump_height"]  # sliders with their units
@@ -129,7 +131,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     # an [L21] run's body changes on the fly too; its goals wait for `perform`
     body = Session(*trained("configs/hopper_jump_body.yaml", small))
-    with TestClient(create_app(body)) as client:
+    with TestClient(create_app(body), base_url=LOOPBACK) as client:
         state = client.get("/state").json()
         name = state["shape_params"][0]
         lo, hi = state["ranges"][name]
@@ -141,10 +143,17 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     steer = {"task.target_direction": [-1.0, 1.0], "env.max_episode_seconds": 2.0}
     biped = Session(*trained("configs/biped_lower.yaml", small | steer))
-    with TestClient(create_app(biped)) as client:
+    with TestClient(create_app(biped), base_url=LOOPBACK) as client:
         before = client.get("/state").json()["task"]["target_direction"]
         after = client.post("/steer", json={"delta": 0.15}).json()["task"]["target_direction"]
         assert after == pytest.approx(before + 0.15)
         assert client.post("/steer", json={"delta": 5.0}).json()["task"][
             "target_direction"] == pytest.approx(1.0)  # clipped to the range  # fmt: skip
     biped.stop.set()
+
+
+def test_play_answers_loopback_host_headers_only(play_url):
+    """DNS rebinding: a page of another site that resolves its own name to 127.0.0.1 gets 400."""
+    assert httpx.get(f"{play_url}/state", timeout=5).status_code == 200
+    foreign = httpx.get(f"{play_url}/state", headers={"Host": "evil.example"}, timeout=5)
+    assert foreign.status_code == 400
