@@ -455,7 +455,10 @@ def controllers_list() -> None:
     from paramimic.training import checkpoint
     from services.learner import controllers
 
-    table = Table("name", "config", "character", "motion", "env steps")
+    table = Table()
+    table.add_column("name", no_wrap=True)  # the name is what `play`, `eval` and `render` take
+    for column in ("config", "character", "motion", "env steps"):
+        table.add_column(column)
     for name in controllers.names():
         state = checkpoint.read(controllers.find(name))
         env = state["config"]["env"]
