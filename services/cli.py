@@ -598,6 +598,36 @@ def clip_export(
     console.print(f"wrote {bvh}: {len(frames)} frames of {clip}")
 
 
+@clip_app.command("render")
+def clip_render(
+    clip: Annotated[str, typer.Argument(help="a clip file, a built-in name, or a BVH file")],
+    out: Annotated[Path, typer.Option(help="clip.gif or clip.mp4")] = Path("clip.gif"),
+    width: Annotated[int, typer.Option()] = 320,
+    height: Annotated[int, typer.Option()] = 240,
+    skeleton: Annotated[str, typer.Option(help="a BVH file's skeleton map")] = "auto",
+    start: Annotated[float | None, typer.Option(help="a BVH file's first second")] = None,
+    end: Annotated[float | None, typer.Option(help="a BVH file's last second")] = None,
+) -> None:
+    """Play a clip on the humanoid, kinematically (no training, no physics); a BVH file is
+    imported as `clip import` does and its own skeleton drawn beside the humanoid in red."""
+    _headless_gl()
+    from paramimic.characters.bvh_import import clip_frames, import_bvh, render_clip
+    from services.media import write_animation
+
+    try:
+        if clip.lower().endswith(".bvh"):
+            imported = import_bvh(clip, skeleton, start, end)
+            frames, source, bones = imported.frames, imported.source, imported.bones
+        else:
+            frames, source, bones = clip_frames(clip), None, ()
+    except (ValueError, KeyError, OSError) as e:
+        _fail(str(e))
+    images = render_clip(frames, source, bones, width, height)
+    fps = 1.0 / float(frames[0, 0]) if frames[0, 0] > 0 else 30.0
+    write_animation(images, out, fps)
+    console.print(f"wrote {out}: {len(images)} frames at {fps:g} fps")
+
+
 PLACEHOLDERS = {"change-me", "changeme", "password", "secret", "redis", "token", "example"}
 MIN_SECRET = 16
 MIN_DISTINCT = 8  # 'aaaaaaaaaaaaaaaa' is 16 characters and no secret

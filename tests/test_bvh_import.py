@@ -200,3 +200,30 @@ def test_a_shipped_clip_round_trips_through_bvh(tmp_path, clip):
     rms = float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
     assert rms < 0.02, rms
     np.testing.assert_allclose(back.frames[:n, 1:4], original[:n, 1:4], atol=1e-3)
+
+
+def test_a_clip_renders_beside_its_source_skeleton(tmp_path):
+    """`paramimic clip render FILE.bvh`, as a user runs it (MUJOCO_GL unset): the humanoid
+    playing the import, the source's bones drawn beside it in red; a clip alone has none."""
+    import os
+
+    import imageio.v3 as iio
+
+    def render(clip: str, out: Path) -> np.ndarray:
+        env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+        res = subprocess.run(
+            [sys.executable, "-m", "services.cli", "clip", "render", clip, "--out", str(out),
+             "--width", "320", "--height", "240", "--start", "3.0", "--end", "3.2"],
+            capture_output=True, text=True, timeout=300, env=env,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stdout + res.stderr
+        return iio.imread(out, index=None)
+
+    def red(image: np.ndarray) -> int:
+        r, g, b = (image[..., i].astype(int) for i in range(3))
+        return int(((r > 120) & (r > 2 * g) & (r > 2 * b)).sum())
+
+    with_source = render(str(CMU_FILE), tmp_path / "bvh.gif")
+    alone = render("humanoid_walk", tmp_path / "walk.gif")
+    assert len(with_source) == 7 and with_source[0].shape[:2] == (240, 320)
+    assert red(with_source[3]) > 20 and red(alone[3]) == 0

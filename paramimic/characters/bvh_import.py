@@ -217,6 +217,10 @@ class Imported:
 
     frames: np.ndarray
     report: dict = field(default_factory=dict)
+    # the source's nodes [F, N, 3] in the clip's frame (Y up, metres, the feet's lift applied)
+    # and its bones (parent, child) node indices: what `paramimic clip render` draws beside it
+    source: np.ndarray | None = None
+    bones: tuple[tuple[int, int], ...] = ()
 
     def clip(self, name: str = "imported", loop: str = "none") -> Clip:
         return load_deepmimic(Path(f"{name}.txt"), name=name, text=self.text(loop))
@@ -305,14 +309,16 @@ def import_bvh(
         frames[:, 2] += lift
     else:
         lowest -= lift
+    source = positions * metres  # the source skeleton in the clip's frame, lifted alike
+    source[..., 1] += (lift if ground else np.zeros_like(lift))[:, None]
+    names = list(nodes)
+    bones = tuple((names.index(parent[n]), k) for k, n in enumerate(names) if parent[n])
     cycle = None
     if loop:
         a, b, residual = find_cycle(frames, fps)
-        frames, lowest, contacts = (
-            close_cycle(frames[a : b + 1]),
-            lowest[a : b + 1],
-            contacts[a : b + 1],
-        )
+        frames = close_cycle(frames[a : b + 1])
+        frames[:, 0], frames[-1, 0] = 1.0 / fps, 0.0  # the last frame ends the clip
+        lowest, contacts, source = lowest[a : b + 1], contacts[a : b + 1], source[a : b + 1]
         cycle = {"start_s": a / fps, "end_s": b / fps, "residual_before_closing": residual}
     report = {
         "file": str(path),
@@ -336,7 +342,7 @@ def import_bvh(
         "contact_share": float(contacts.mean()),
         "cycle": cycle,
     }
-    return Imported(frames, report)
+    return Imported(frames, report, source, bones)
 
 
 CYCLE_SECONDS = (0.6, 2.5)  # a gait cycle (two steps) lasts this long
@@ -674,3 +680,49 @@ def _columns() -> dict[str, tuple[int, int]]:
         out[joint] = (col, width)
         col += width
     return out
+
+
+def render_clip(
+    frames: np.ndarray,
+    source: np.ndarray | None = None,
+    bones=(),
+    width: int = 320,
+    height: int = 240,
+    beside: float = 1.0,
+) -> list[np.ndarray]:
+    """A clip played on the base humanoid, kinematically (no physics, no policy), as RGB frames;
+    with `source` ([F, N, 3], the clip's frame), the source skeleton drawn `beside` metres to
+    the side (+x) as red bones, so that the retargeting can be seen."""
+    from paramimic.motion.clip import Y_UP_TO_Z_UP
+
+    body = HUMANOID.compile()
+    clip = load_deepmimic(Path("frames.txt"), text=json.dumps({"Frames": frames.tolist()}))
+    qpos = HUMANOID.pose_qpos(body, clip.sample(np.cumsum(np.r_[0.0, clip.durations[:-1]])))
+    data = mujoco.MjData(body.model)
+    renderer = mujoco.Renderer(body.model, height, width)
+    camera = mujoco.MjvCamera()
+    camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+    camera.trackbodyid = body.root_body_id
+    camera.azimuth, camera.elevation, camera.distance = 90.0, -10.0, 4.5
+    to_world = Y_UP_TO_Z_UP.as_matrix()
+    red = np.array([0.85, 0.25, 0.2, 1.0], np.float32)
+    images = []
+    try:
+        for k, q in enumerate(qpos):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(body.model, data)
+            renderer.update_scene(data, camera)
+            if source is not None and k < len(source):
+                points = source[k] @ to_world.T + np.array([beside, 0.0, 0.0])
+                scene = renderer.scene
+                for a, b in bones[: scene.maxgeom - scene.ngeom]:
+                    geom = scene.geoms[scene.ngeom]
+                    mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, np.zeros(3),
+                                        np.zeros(3), np.eye(3).ravel(), red)  # fmt: skip
+                    mujoco.mjv_connector(geom, mujoco.mjtGeom.mjGEOM_CAPSULE, 0.02,
+                                         points[a], points[b])  # fmt: skip
+                    scene.ngeom += 1
+            images.append(renderer.render().copy())
+    finally:
+        renderer.close()
+    return images
