@@ -86,7 +86,8 @@ def test_runs_page_and_a_live_run_page_with_pause(browser, api_url, job, screens
     cells = _js(browser, "return document.getElementById('task-map').data[0].z.flat().length")
     assert cells == len(grid["values"]) * len(grid["values"][0]) == 21 * 21
     assert _points(browser, "task-map", 2) > 0  # the recent task samples over it
-    assert _js(browser, "return document.querySelectorAll('#events [data-type]').length") > 0
+    events = "return document.querySelectorAll('#events [data-type]').length"
+    wait_until(lambda: _js(browser, events) > 0, 60, "the events list")  # its own poll
     browser.save_screenshot(str(screenshots / "dashboard_run.png"))
 
     # pause from the page (the token typed in, sent as a bearer token): progress stops
