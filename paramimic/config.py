@@ -239,6 +239,11 @@ class EnvConfig(Section):
     ground_fit: bool = Field(
         True, description="fit a new body's feet to the base's contacts ([WL19] Eq. 1) at reset"
     )
+    ground_fit_max_change: PositiveFloat | None = Field(
+        None, description="rad: a ground fit that moves a joint farther than this from the "
+        "pose falls back to lifting the body (the humanoid mid-stride crouches to reach the "
+        "base's swing-foot points); None: no limit",
+    )  # fmt: skip
     com_velocity_window: PositiveFloat = Field(
         2.0, description="seconds over which the COM velocity is averaged ([WL19] Eq. 6)"
     )

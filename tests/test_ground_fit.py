@@ -166,3 +166,22 @@ def test_a_shaped_humanoid_on_its_clip_gait_starts_on_the_base_bodys_contacts():
         points = env.data.site_xpos[env.character.contact_site_ids]
         assert np.abs(points[on_ground, 2]).max() < 5e-3, shape
         assert points[:, 2].min() > -5e-3, shape
+
+
+def test_a_fit_that_would_crouch_the_body_falls_back_to_the_lift():
+    """`env.ground_fit_max_change`: mid-stride, a humanoid with longer legs reaches the base's
+    swing-foot points by crouching (a body 0.7 m off its reference at reset); with the limit,
+    such fits fall back to the lift and every reset starts near its reference."""
+    from paramimic.config import EnvConfig
+
+    task = {"leg_length": (1.05, 1.05), "arm_length": (0.97, 0.97)}
+    worst = {}
+    for limit in (None, 0.5):
+        config = EnvConfig(gait="humanoid_walk", physics_hz=300, ground_fit_max_change=limit)
+        env = ParamEnv("humanoid", task, config)
+        errors = []
+        for seed in range(12):
+            env.reset(seed=seed)
+            errors.append(env.body_error()[1])
+        worst[limit] = max(errors)
+    assert worst[None] > 0.4 and worst[0.5] < 0.2, worst

@@ -137,16 +137,22 @@ def fit_ground_contact(
     joints: np.ndarray,
     weight: float = W_Q,
     maxiter: int = 50,
+    max_change: float | None = None,
 ) -> GroundFit:
     """Solve Eq. 1 by SLSQP from q0; `targets` [P, 3] are the base's contact points c̄ for the
     contact `sites` [P]; `height_joint` is the root's vertical DOF (a slide, or a free joint
     whose third coordinate is the height), `joints` the actuated hinge joint ids. Falls back to
-    `lift_to_ground` when SLSQP fails or leaves a ground point off by more than 1 mm."""
+    `lift_to_ground` when SLSQP fails, leaves a ground point off by more than 1 mm, or moves a
+    joint more than `max_change` rad from q0 (None: no limit)."""
     with _BLAS.limit(limits=1, user_api="blas"):
-        return _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter)
+        return _fit(
+            model, data, q0, targets, sites, height_joint, joints, weight, maxiter, max_change
+        )
 
 
-def _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter) -> GroundFit:
+def _fit(
+    model, data, q0, targets, sites, height_joint, joints, weight, maxiter, max_change
+) -> GroundFit:
     targets = np.asarray(targets, dtype=np.float64)
     sites = np.asarray(sites)
     joints = np.asarray(joints)
@@ -193,6 +199,10 @@ def _fit(model, data, q0, targets, sites, height_joint, joints, weight, maxiter)
             ok = z.min() > -TOLERANCE and (
                 not len(problem.on_ground) or np.abs(problem.ground(x)).max() < TOLERANCE
             )
+            # a fit that bends the joints far from the pose is no longer the pose (a long-legged
+            # humanoid reaching the base's swing-foot points crouches 17 cm)
+            if max_change is not None:
+                ok = ok and np.abs(x[1:] - problem.x0()[1:]).max() <= max_change
     except (ValueError, np.linalg.LinAlgError):
         ok = False
     if ok:

@@ -204,8 +204,9 @@ class EnvCore(gym.Env, ABC):
             joints = c.model.actuator_trnid[:, 0]
             height_joint = 0 if not self.definition.planar else c.model.joint("rootz").id
             return fit_ground_contact(
-                c.model, self.data, qpos, targets, c.contact_site_ids, height_joint, joints
-            ).qpos
+                c.model, self.data, qpos, targets, c.contact_site_ids, height_joint, joints,
+                max_change=self.config.ground_fit_max_change,
+            ).qpos  # fmt: skip
         return lift_to_ground(c.model, self.data, qpos, c.contact_site_ids, self._height_adr)
 
     def _watch_stability(self) -> None:
