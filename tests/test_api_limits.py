@@ -7,6 +7,7 @@ import json
 import socket
 
 import httpx
+import numpy as np
 import pytest
 import redis
 
@@ -131,4 +132,54 @@ def test_redis_retries_end_at_their_wall_clock_limit(tmp_path):
         assert elapsed < 20.0, elapsed  # counted retries alone: 12 x a 10 s socket timeout
     finally:
         os.kill(server.process.pid, signal.SIGCONT)
+        server.stop()
+
+
+def test_a_polled_elite_set_is_parsed_once_and_thinned_for_plots(tmp_path):
+    """`/curriculum/elites` parses the stored set and builds its k-d tree once per version,
+    not per request (a dashboard polls it every 2 s), and `spread` gives a plot an evenly
+    spaced subset instead of the first `limit`."""
+    from fastapi.testclient import TestClient
+
+    from services.api.app import create_app
+    from services.api.settings import Settings
+
+    server = EmbeddedRedis(tmp_path / "redis")
+    server.start()
+    try:
+        _start_run(server.url, "elite-run", tmp_path)
+        client = redis.Redis.from_url(server.url)
+        keys = RunKeys("elite-run")
+        ranges = {"gravity": [0.5, 1.5], "jump_height": [0.0, 0.6]}
+        n = 20_001
+        g = np.linspace(0.5, 1.5, n)
+        state = {
+            "params": np.stack([g, np.full(n, 0.3)], 1).tolist(),
+            "fitness": np.linspace(0.2, 1.0, n).tolist(),
+            "keys": [f"e{i}" for i in range(n)],
+        }
+        client.hset(
+            keys.curriculum,
+            mapping={"summary": json.dumps({"task_ranges": ranges}), "elites": json.dumps(state)},
+        )
+        app = create_app(Settings(redis_url=server.url))
+        with TestClient(app, base_url="http://127.0.0.1") as c:
+            for _ in range(5):
+                r = c.get("/runs/elite-run/curriculum/elites", params={"limit": 100_000})
+                assert r.status_code == 200 and len(r.json()["items"]) == n
+            assert app.state.elite_cache.builds == 1
+            near = c.get("/runs/elite-run/curriculum/elites", params={"near": "1.0,0.3", "k": 1})
+            assert near.json()["items"][0]["key"] == f"e{(n - 1) // 2}"
+            assert app.state.elite_cache.builds == 1
+            thin = c.get("/runs/elite-run/curriculum/elites", params={"limit": 5, "spread": True})
+            got = [e["params"]["gravity"] for e in thin.json()["items"]]
+            assert got == pytest.approx([0.5, 0.75, 1.0, 1.25, 1.5], abs=1e-4)
+            first = c.get("/runs/elite-run/curriculum/elites", params={"limit": 5}).json()
+            assert [e["key"] for e in first["items"]] == [f"e{i}" for i in range(5)]
+            # the sampler writes a new version: parsed again, the new set served
+            state = {k: v[:10] for k, v in state.items()}
+            client.hset(keys.curriculum, "elites", json.dumps(state))
+            r = c.get("/runs/elite-run/curriculum/elites").json()
+            assert r["total"] == 10 and app.state.elite_cache.builds == 2
+    finally:
         server.stop()

@@ -17,7 +17,7 @@ from redis.exceptions import TimeoutError as RedisTimeoutError
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from services.api import dashboard
-from services.api.routes import router
+from services.api.routes import EliteCache, router
 from services.api.settings import Settings
 from services.store import finite
 
@@ -115,6 +115,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         redoc_url=None,
     )
     app.state.settings = settings
+    app.state.elite_cache = EliteCache()
     app.add_exception_handler(RequestValidationError, invalid_request)
     app.include_router(router)
     app.include_router(dashboard.router)

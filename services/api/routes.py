@@ -3,8 +3,11 @@ control hash that the learner polls); nothing here imports torch, mujoco or ray.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import secrets
+import threading
+from collections import OrderedDict
 from typing import Annotated
 
 import numpy as np
@@ -273,8 +276,9 @@ def _floats(name: str, text: str | None, dim: int) -> np.ndarray | None:
     return values
 
 
-async def _skill_state(r: Redis, run: str, field: str) -> tuple[RunKeys, dict, dict | None]:
-    """The run's [L21] curriculum summary and one of its JSON fields; 404 for other runs."""
+async def _skill_state(r: Redis, run: str, field: str) -> tuple[RunKeys, dict, str | None]:
+    """The run's [L21] curriculum summary and one of its JSON fields, unparsed; 404 for other
+    runs."""
     keys, _ = await run_status(r, run)
     summary, value = await r.hmget(keys.curriculum, ["summary", field])
     s = json.loads(summary) if summary else {}
@@ -283,13 +287,52 @@ async def _skill_state(r: Redis, run: str, field: str) -> tuple[RunKeys, dict, d
             status.HTTP_404_NOT_FOUND,
             f"run {run!r} has no [L21] skill curriculum (no elite set or density)",
         )
-    return keys, s, json.loads(value) if value else None
+    return keys, s, value
+
+
+class EliteCache:
+    """The last parsed elite set (and its k-d tree) of each run, reused until the sampler
+    writes another: a dashboard polling a 300k-entry set parses and builds it once, not per
+    request. Keyed by the stored text's digest; holds the `size` most recent runs."""
+
+    def __init__(self, size: int = 8):
+        self.size = size
+        self.entries: OrderedDict[str, tuple[bytes, TaskSpace, EliteSet]] = OrderedDict()
+        self.builds = 0
+        self.lock = threading.Lock()
+
+    def get(self, run: str, summary: dict, text: str | None) -> tuple[TaskSpace, EliteSet]:
+        raw = (text or "").encode()
+        digest = (
+            hashlib.blake2b(raw, digest_size=16).digest()
+            + json.dumps(summary["task_ranges"], sort_keys=True).encode()
+        )
+        with self.lock:
+            hit = self.entries.get(run)
+            if hit is not None and hit[0] == digest:
+                self.entries.move_to_end(run)
+                return hit[1], hit[2]
+        space = TaskSpace.from_ranges(summary["task_ranges"])
+        elites = EliteSet(space.dim, space.metric)  # distances on the normalized box
+        elites.from_state(json.loads(text) if text else {"params": [], "fitness": [], "keys": []})
+        with self.lock:
+            self.builds += 1
+            self.entries[run] = (digest, space, elites)
+            self.entries.move_to_end(run)
+            while len(self.entries) > self.size:
+                self.entries.popitem(last=False)
+        return space, elites
+
+
+def elite_cache(request: Request) -> EliteCache:
+    return request.app.state.elite_cache
 
 
 @router.get("/runs/{run}/curriculum/elites", response_model=Elites, tags=["curriculum"])
 async def elites(
     run: RunId,
     r: RedisDep,
+    cache: Annotated[EliteCache, Depends(elite_cache)],
     near: Annotated[
         str | None, Query(max_length=2000, description="a point 'x1,x2,...': its k nearest")
     ] = None,
@@ -297,18 +340,26 @@ async def elites(
     low: Annotated[str | None, Query(max_length=2000, description="box corner 'x1,...'")] = None,
     high: Annotated[str | None, Query(max_length=2000, description="box corner 'x1,...'")] = None,
     limit: Annotated[int, Query(ge=1, le=100_000)] = 1000,
+    spread: Annotated[
+        bool,
+        Query(
+            description="more matches than `limit`: an evenly spaced subset (for plots), "
+            "not the first `limit`"
+        ),
+    ] = False,
 ):
     """The elite set ([L21] §5.2): all, those within the box [low, high], or the k nearest to
     a point (distance on the task box normalized per dimension), with their fitness."""
     _, summary, table = await _skill_state(r, run, "elites")
-    # building the k-d tree and querying it is CPU work: a worker thread, not the event loop
-    return await run_in_threadpool(_elites, run, summary, table, near, k, low, high, limit)
+    # parsing the set, building its k-d tree and querying it is CPU work: a worker thread, not
+    # the event loop
+    return await run_in_threadpool(
+        _elites, cache, run, summary, table, near, k, low, high, limit, spread
+    )
 
 
-def _elites(run, summary, table, near, k, low, high, limit) -> Elites:
-    space = TaskSpace.from_ranges(summary["task_ranges"])
-    elites = EliteSet(space.dim, space.metric)  # distances on the normalized box
-    elites.from_state(table or {"params": [], "fitness": [], "keys": []})
+def _elites(cache, run, summary, table, near, k, low, high, limit, spread) -> Elites:
+    space, elites = cache.get(run, summary, table)
     point = _floats("near", near, space.dim)
     box_low, box_high = _floats("low", low, space.dim), _floats("high", high, space.dim)
     rows = elites.within_box(box_low, box_high)
@@ -316,6 +367,10 @@ def _elites(run, summary, table, near, k, low, high, limit) -> Elites:
     if point is not None:
         rows = elites.nearest(point, k, among=rows)
         distance = elites.distance(rows, point)
+    if spread and len(rows) > limit:
+        pick = np.linspace(0, len(rows) - 1, limit).round().astype(int)
+        rows = rows[pick]
+        distance = None if distance is None else distance[pick]
     rows = rows[:limit]
     items = [
         Elite(
@@ -336,7 +391,7 @@ async def density(run: RunId, r: RedisDep):
     _, _, grid = await _skill_state(r, run, "density")
     if not grid:
         return DensityGrid(run_id=run, available=False)
-    return DensityGrid(run_id=run, available=True, **grid)
+    return DensityGrid(run_id=run, available=True, **json.loads(grid))
 
 
 @router.get("/runs/{run}/curriculum/samples", response_model=list[TaskBatch], tags=["curriculum"])

@@ -77,7 +77,7 @@ async function wl19(c) {
      {xaxis: {title: {text: label(g.dims[0])}}, yaxis: {title: {text: label(g.dims[1])}}}), CONFIG);
 }
 async function l21(c) {
-  const [e, d] = await Promise.all([getJSON(`/runs/${RUN}/curriculum/elites?limit=100000`),
+  const [e, d] = await Promise.all([getJSON(`/runs/${RUN}/curriculum/elites?limit=5000&spread=true`),
                                     getJSON(`/runs/${RUN}/curriculum/density`)]);
   const traces = [];
   if (d.available) {
