@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import secrets
 import json
 import re
 import sys
@@ -437,8 +438,13 @@ def play(
     elif not port_is_free(host, port):
         _fail(f"{host}:{port} is in use; pass --port (0 = any free port)")
     cfg, policy, state = _load_policy(run)
-    console.print(f"play: http://{host}:{port}  ({cfg.name}, {cfg.character}; Ctrl-C to stop)")
-    serve(cfg, policy, state, host, port)
+    token = secrets.token_urlsafe(16)
+    console.print(
+        f"play: http://{host}:{port}/?token={token}  ({cfg.name}, {cfg.character}; Ctrl-C to "
+        "stop)",
+        soft_wrap=True,
+    )
+    serve(cfg, policy, state, host, port, token)
 
 
 controllers_app = typer.Typer(

@@ -11,22 +11,26 @@ machine that cannot keep 30 Hz it runs slower than real time, and says so (real-
 from __future__ import annotations
 
 import io
+import secrets
 import threading
 import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 
 import numpy as np
-from fastapi import FastAPI, HTTPException
-from fastapi.responses import FileResponse, StreamingResponse
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, StreamingResponse
 from pydantic import BaseModel
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from paramimic.config import TASK_GOALS, ExperimentConfig
+from services.asgi import BodyLimit
 
 STATIC = Path(__file__).resolve().parent / "api" / "static"
 STEER = 0.15  # rad per arrow key press (3D bodies: the target direction)
 RESTART_AFTER = 1.0  # seconds a fallen body stays down before the episode restarts
+MAX_BODY = 4096  # bytes: the largest request (a task's values) is well under 1 KB
+COOKIE = "paramimic_play"
 FREE, TRACKING = 0, 1  # mujoco.mjtCamera: a fixed view, or one that follows the root
 
 
@@ -202,7 +206,11 @@ class Steer(BaseModel):
     delta: float
 
 
-def create_app(session: Session) -> FastAPI:
+def create_app(session: Session, token: str) -> FastAPI:
+    """The page and its endpoints. Every request carries the session's `token`: the address
+    `paramimic play` prints has it (`/?token=...`), which sets it as a same-site cookie, so
+    another user or process on the machine cannot watch or drive the session (as Jupyter does)."""
+
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         yield
@@ -212,6 +220,22 @@ def create_app(session: Session) -> FastAPI:
     # loopback only, and a Host header of loopback only: a web page elsewhere cannot drive it
     # by rebinding its own name to 127.0.0.1
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=["127.0.0.1", "localhost", "::1"])
+    app.add_middleware(BodyLimit, limit=MAX_BODY)
+
+    @app.middleware("http")
+    async def session_token(request: Request, call_next):
+        given = request.query_params.get("token")
+        if request.url.path == "/" and given is not None and secrets.compare_digest(given, token):
+            response = RedirectResponse("/", status_code=303)  # the token leaves the address bar
+            response.set_cookie(COOKIE, token, httponly=True, samesite="strict")
+            return response
+        if secrets.compare_digest(request.cookies.get(COOKIE, ""), token):
+            return await call_next(request)
+        return JSONResponse(
+            {"detail": "open the address `paramimic play` printed: it carries this session's "
+                       "token"},
+            status_code=401,
+        )  # fmt: skip
 
     def checked(f, *args):
         try:
@@ -279,7 +303,7 @@ def create_app(session: Session) -> FastAPI:
     return app
 
 
-def serve(cfg: ExperimentConfig, policy, state: dict, host: str, port: int) -> None:
+def serve(cfg: ExperimentConfig, policy, state: dict, host: str, port: int, token: str) -> None:
     import uvicorn
 
     session = Session(cfg, policy, state)
@@ -287,7 +311,7 @@ def serve(cfg: ExperimentConfig, policy, state: dict, host: str, port: int) -> N
     loop.start()
     try:
         uvicorn.run(
-            create_app(session), host=host, port=port, log_level="warning",
+            create_app(session, token), host=host, port=port, log_level="warning",
             timeout_graceful_shutdown=3,  # open streams are closed after that
         )  # fmt: skip
     finally:

@@ -33,7 +33,7 @@ TORCH_MODULES = {
 }
 # services/<kind>/ import the library and these shared modules, not each other's packages;
 # the launcher and the CLI compose them.
-SHARED_SERVICES = ("services.keys", "services.store", "services.media")
+SHARED_SERVICES = ("services.keys", "services.store", "services.media", "services.asgi")
 COMPOSERS = ("services.launch", "services.cli")
 
 

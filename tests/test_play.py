@@ -17,6 +17,7 @@ import yaml
 from conftest import wait_until
 
 from services.launch.processes import free_port
+from services.play import COOKIE
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = {
@@ -52,27 +53,37 @@ def play_url(tmp_path_factory):
     threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True).start()
     url = f"http://127.0.0.1:{port}"
 
+    def printed() -> bool:
+        assert proc.poll() is None, "".join(lines)
+        return "play: http" in "".join(lines)
+
+    wait_until(printed, 120, "the play address")
+    found = re.search(rf"play: http://127\.0\.0\.1:{port}/\?token=([\w-]+)", "".join(lines))
+    assert found, "".join(lines)
+    token = found.group(1)
+
     def up() -> bool:
         assert proc.poll() is None, "".join(lines)
         try:
-            return httpx.get(f"{url}/state", timeout=2).status_code == 200
+            return httpx.get(f"{url}/state", cookies={COOKIE: token}, timeout=2).status_code == 200
         except httpx.HTTPError:
             return False
 
     wait_until(up, 120, "the play server")
-    assert re.search(rf"play: http://127\.0\.0\.1:{port}", "".join(lines))
-    yield url
+    yield url, token
     proc.terminate()  # SIGTERM: uvicorn ends, open MJPEG streams included
     proc.wait(30)
 
 
 def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url, screenshots):
-    state = lambda: httpx.get(f"{play_url}/state", timeout=5).json()  # noqa: E731
+    play_url, token = play_url
+    http = httpx.Client(cookies={COOKIE: token}, timeout=5)
+    state = lambda: http.get(f"{play_url}/state").json()  # noqa: E731
     first = state()
     assert first["kind"] == "family" and first["shape_params"] == [
         "left_leg_length", "right_leg_length"]  # fmt: skip
     wait_until(lambda: state()["frame"] > first["frame"] + 10, 60, "frames")
-    browser.get(play_url)
+    browser.get(f"{play_url}/?token={token}")  # the printed address
     wait_until(lambda: browser.execute_script(
         "const v = document.getElementById('view'); return v.complete && v.naturalWidth > 0;"),
         60, "the MJPEG stream in the page")  # fmt: skip
@@ -88,9 +99,9 @@ def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url, scr
     assert after["body"]["mass"] != pytest.approx(before["body"]["mass"], rel=1e-6)
     wait_until(lambda: state()["frame"] > after["frame"] + 10, 60, "frames after the change")
     # a goal slider changes the goal; out-of-range values are refused with a message
-    r = httpx.post(f"{play_url}/task", json={"values": {"target_velocity": 1.4}})
+    r = http.post(f"{play_url}/task", json={"values": {"target_velocity": 1.4}})
     assert r.status_code == 200 and r.json()["task"]["target_velocity"] == pytest.approx(1.4)
-    r = httpx.post(f"{play_url}/task", json={"values": {"left_leg_length": 3.0}})
+    r = http.post(f"{play_url}/task", json={"values": {"left_leg_length": 3.0}})
     assert r.status_code == 422 and "outside its range" in r.json()["detail"]
     browser.save_screenshot(str(screenshots / "play.png"))
 
@@ -105,6 +116,12 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
     from services.play import Session, create_app
 
     LOOPBACK = "http://127.0.0.1"  # play answers loopback Host headers only
+    TOKEN = "a-session-token"
+
+    def client_of(session):
+        client = TestClient(create_app(session, TOKEN), base_url=LOOPBACK)
+        assert client.get(f"/?token={TOKEN}").status_code == 200  # sets the cookie, redirects
+        return client
 
     def trained(config: str, overrides: dict):
         cfg = load_config(ROOT / config, overrides | {"train.run_dir": str(tmp_path / config)})
@@ -116,7 +133,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     small = {"ppo.num_steps": 256, "ppo.minibatch_size": 128, "actors.num_envs": 4}
     skill = Session(*trained("configs/walker_jump.yaml", small))
-    with TestClient(create_app(skill), base_url=LOOPBACK) as client:
+    with client_of(skill) as client:
         state = client.get("/state").json()
         assert state["kind"] == "skill" and set(state["task"]) == {"gravity", "jump_height"}
         assert state["goals"] == ["gravity", "jump_height"]  # sliders with their units
@@ -131,7 +148,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     # an [L21] run's body changes on the fly too; its goals wait for `perform`
     body = Session(*trained("configs/hopper_jump_body.yaml", small))
-    with TestClient(create_app(body), base_url=LOOPBACK) as client:
+    with client_of(body) as client:
         state = client.get("/state").json()
         name = state["shape_params"][0]
         lo, hi = state["ranges"][name]
@@ -143,7 +160,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     steer = {"task.target_direction": [-1.0, 1.0], "env.max_episode_seconds": 2.0}
     biped = Session(*trained("configs/biped_lower.yaml", small | steer))
-    with TestClient(create_app(biped), base_url=LOOPBACK) as client:
+    with client_of(biped) as client:
         before = client.get("/state").json()["task"]["target_direction"]
         after = client.post("/steer", json={"delta": 0.15}).json()["task"]["target_direction"]
         assert after == pytest.approx(before + 0.15)
@@ -154,6 +171,33 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
 def test_play_answers_loopback_host_headers_only(play_url):
     """DNS rebinding: a page of another site that resolves its own name to 127.0.0.1 gets 400."""
-    assert httpx.get(f"{play_url}/state", timeout=5).status_code == 200
-    foreign = httpx.get(f"{play_url}/state", headers={"Host": "evil.example"}, timeout=5)
+    play_url, token = play_url
+    mine = {COOKIE: token}
+    assert httpx.get(f"{play_url}/state", cookies=mine, timeout=5).status_code == 200
+    foreign = httpx.get(
+        f"{play_url}/state", headers={"Host": "evil.example"}, cookies=mine, timeout=5
+    )
     assert foreign.status_code == 400
+
+
+def test_play_wants_its_session_token_and_a_small_body(play_url):
+    """Another user or process on the machine cannot watch or drive the session without the
+    printed token; the address with it sets the cookie; a body over 4 KB gets 413 unparsed."""
+    play_url, token = play_url
+    for path in ("/", "/state", "/stream", "/static/play.js"):
+        r = httpx.get(f"{play_url}{path}", timeout=5)
+        assert r.status_code == 401 and "token" in r.json()["detail"], path
+        wrong = httpx.get(f"{play_url}{path}", cookies={COOKIE: "guess"}, timeout=5)
+        assert wrong.status_code == 401, path
+    assert httpx.get(f"{play_url}/?token=guess", timeout=5).status_code == 401
+    r = httpx.post(f"{play_url}/task", json={"values": {"target_velocity": 1.0}}, timeout=5)
+    assert r.status_code == 401
+    with httpx.Client(base_url=play_url, timeout=5) as c:
+        r = c.get(f"/?token={token}", follow_redirects=False)
+        assert r.status_code == 303 and r.headers["location"] == "/"
+        assert "httponly" in r.headers["set-cookie"].lower()
+        assert "samesite=strict" in r.headers["set-cookie"].lower()
+        assert c.get("/state").status_code == 200  # the cookie it set
+        big = {"values": {"target_velocity": 1.0}, "pad": "x" * 5000}
+        r = c.post("/task", json=big)
+        assert r.status_code == 413 and "4096 bytes" in r.json()["detail"]

@@ -19,6 +19,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 from services.api import dashboard
 from services.api.routes import EliteCache, router
 from services.api.settings import Settings
+from services.asgi import BodyLimit
 from services.store import finite
 
 MAX_BODY = 4096  # bytes: the largest mutating request (PUT k) is ~20
@@ -43,49 +44,6 @@ async def damaged_state(request: Request, exc: Exception) -> JSONResponse:
         },  # fmt: skip
         status_code=409,
     )
-
-
-class BodyLimit:
-    """ASGI middleware: a mutating request whose body exceeds `limit` bytes gets 413 before
-    anything parses it (by Content-Length, or counted as a chunked body streams in)."""
-
-    def __init__(self, app, limit: int = MAX_BODY) -> None:
-        self.app, self.limit = app, limit
-
-    async def __call__(self, scope, receive, send) -> None:
-        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
-            await self.app(scope, receive, send)
-            return
-        length = dict(scope["headers"]).get(b"content-length")
-        if length is not None and (not length.isdigit() or int(length) > self.limit):
-            await self._too_large(send)
-            return
-        body, more = b"", True
-        while more:  # read the whole (bounded) body first, then replay it to the app
-            message = await receive()
-            if message["type"] != "http.request":
-                break
-            body += message.get("body", b"")
-            more = message.get("more_body", False)
-            if len(body) > self.limit:
-                await self._too_large(send)
-                return
-        replayed = False
-
-        async def replay():
-            nonlocal replayed
-            if not replayed:
-                replayed = True
-                return {"type": "http.request", "body": body, "more_body": False}
-            return await receive()
-
-        await self.app(scope, replay, send)
-
-    async def _too_large(self, send) -> None:
-        response = JSONResponse(
-            {"detail": f"request body over {self.limit} bytes"}, status_code=413
-        )
-        await response({"type": "http"}, None, send)
 
 
 async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -124,7 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     damaged = (json.JSONDecodeError, KeyError, TypeError, ValidationError, ResponseValidationError)
     for error in damaged:
         app.add_exception_handler(error, damaged_state)
-    app.add_middleware(BodyLimit)
+    app.add_middleware(BodyLimit, limit=MAX_BODY)
     # a Host header not ours (DNS rebinding: a page of another site resolving its own name to
     # 127.0.0.1) is refused before any route runs
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=settings.allowed_hosts)
