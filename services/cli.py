@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import secrets
 import json
 import re
+import secrets
 import sys
 from pathlib import Path
 from typing import Annotated
