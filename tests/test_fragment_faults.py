@@ -46,11 +46,47 @@ class FlakyActor(RolloutActor.__ray_actor_class__):
         return super().sample(*args, **kw)
 
 
-def _flaky(every: int):
+@ray.remote(num_cpus=1, max_restarts=-1)
+class RayFailingActor(RolloutActor.__ray_actor_class__):
+    """Every 3rd fragment fails in Ray, not in the env: one that does not deserialize, or an
+    error that does not."""
+
+    def __init__(self, *args, every: int = 3, **kw) -> None:
+        super().__init__(*args, **kw)
+        self.calls, self.every = 0, every
+
+    def sample(self, *args, **kw):
+        # defined here, not in the module: the workers cannot import this test module, and
+        # cloudpickle sends local classes by value
+        class TwoArgError(Exception):
+            """Pickles, but unpickling calls __init__ with one argument: Ray's
+            UnserializableException on the learner."""
+
+            def __init__(self, a, b):
+                super().__init__(f"{a} {b}")
+
+        def unloadable():
+            raise ValueError("this object cannot be rebuilt on the learner (injected)")
+
+        class Unloadable:
+            """Pickles, but does not unpickle: Ray's RaySystemError on the learner."""
+
+            def __reduce__(self):
+                return (unloadable, ())
+
+        self.calls += 1
+        if self.calls % self.every == 0:
+            if self.calls % (2 * self.every) == 0:
+                raise TwoArgError(1, 2)
+            return Unloadable()
+        return super().sample(*args, **kw)
+
+
+def _flaky(every: int, actor=FlakyActor):
     class Options:  # spawner calls actor_class.options(...).remote(...)
         @staticmethod
         def options(**opts):
-            inner = FlakyActor.options(**opts)
+            inner = actor.options(**opts)
 
             class Remote:
                 @staticmethod
@@ -71,6 +107,18 @@ def test_env_errors_drop_fragments_and_training_goes_on(distributed, tmp_path):
     assert stats["actor_restarts"] == 0  # an env error is not an actor death
     kinds = [(k, d["reason"]) for k, _, d in backend.take_events() if k == "fragment_error"]
     assert ("fragment_error", "env_error") in kinds
+
+
+def test_fragments_ray_fails_are_dropped_and_training_goes_on(distributed, tmp_path):
+    """RaySystemError (a fragment that does not deserialize) and UnserializableException (an
+    error that does not) drop a fragment as an env error does; they used to end the run."""
+    trainer, backend = distributed(_cfg(), tmp_path, actor_class=_flaky(3, RayFailingActor))
+    trainer.train(backend, total_steps=8 * 256)
+    assert trainer.progress.iteration >= 8
+    assert backend.fragment_errors.keys() == {"ray_error"}
+    assert backend.fragment_errors["ray_error"] >= 2
+    said = " ".join(m for k, m, _ in backend.take_events() if k == "fragment_error")
+    assert "RaySystemError" in said or "UnserializableException" in said
 
 
 def test_a_persistent_env_error_stops_with_the_reason(distributed, tmp_path):

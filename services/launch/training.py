@@ -195,7 +195,12 @@ def _train_distributed(run: Run, opts: LaunchOptions, api_port: int, services: E
 def _stops() -> dict[type[Exception], tuple[int, str, str]]:
     """What ends a distributed run early: its exit code and what to say (Trainer.train writes
     a checkpoint on the way out in every case)."""
-    from services.learner.ray_backend import AllActorsLost, FragmentsFailing, SamplerFailed
+    from services.learner.ray_backend import (
+        AllActorsLost,
+        ClusterFailing,
+        FragmentsFailing,
+        SamplerFailed,
+    )
     from services.store import LeaseLost
 
     fix = "checkpoint saved, fix and --resume"
@@ -204,6 +209,7 @@ def _stops() -> dict[type[Exception], tuple[int, str, str]]:
         TrainingDiverged: (4, "stopped", "checkpoint saved"),
         FragmentsFailing: (5, "stopped (rollouts keep failing)", fix),
         SamplerFailed: (5, "stopped (sampler failed)", fix),
+        ClusterFailing: (5, "stopped (Ray refused the weights)", fix),
         WriteRefused: (
             6,
             "stopped (lease lost)",

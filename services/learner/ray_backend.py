@@ -9,9 +9,10 @@ put once per iteration.
 An actor whose process dies is restarted by Ray (max_restarts=-1); its lost fragment is dropped,
 the restart is counted, the iteration goes on with the other actors' fragments, and the actor is
 asked again at once (its answer, when it is back, joins a later iteration; the PPO ratio corrects
-its version lag). If no actor delivers for `actors.lost_timeout` seconds, `AllActorsLost` is
-raised so that the learner can checkpoint and exit. Which actors are in the pool, on which
-nodes, is `ActorPool`'s business (`actor_pool.py`).
+its version lag). A fragment Ray itself fails (a full disk or object store, an object or error
+that does not deserialize) is dropped the same way, as `ray_error`. If no actor delivers for
+`actors.lost_timeout` seconds, `AllActorsLost` is raised so that the learner can checkpoint and
+exit. Which actors are in the pool, on which nodes, is `ActorPool`'s business (`actor_pool.py`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,13 @@ from collections.abc import Callable
 
 import numpy as np
 import ray
-from ray.exceptions import GetTimeoutError, ObjectLostError, RayActorError, RayTaskError
+from ray.exceptions import (
+    GetTimeoutError,
+    ObjectLostError,
+    RayActorError,
+    RayError,
+    RayTaskError,
+)
 
 from paramimic.config import ExperimentConfig
 from paramimic.rl.rollout import Fragment, steps_per_fragment, tasks_per_fragment
@@ -39,6 +46,7 @@ RETRY_PAUSE = 0.2  # seconds before asking a failed actor again
 
 __all__ = [
     "AllActorsLost",
+    "ClusterFailing",
     "FragmentsFailing",
     "RayBackend",
     "SamplerClient",
@@ -54,6 +62,14 @@ class AllActorsLost(RuntimeError):
 
 class FragmentsFailing(RuntimeError):
     """actors.max_fragment_errors fragment errors in a row: a persistent cause."""
+
+
+class ClusterFailing(RuntimeError):
+    """Ray refused to store the policy weights (object store full, disk full) for
+    `PUT_PATIENCE` seconds."""
+
+
+PUT_PATIENCE = 60.0  # seconds of retries of a refused ray.put (spilling may free the store)
 
 
 class SamplerFailed(RuntimeError):
@@ -86,6 +102,12 @@ class SamplerClient:
             raise SamplerFailed(
                 f"the sampler actor did not answer {name} within {self.timeout:.0f} s "
                 f"({type(e).__name__})"
+            ) from None
+        except RayTaskError:
+            raise  # the sampler's own error, with its traceback
+        except RayError as e:  # Ray itself failed the call: disk, object store, serialization
+            raise SamplerFailed(
+                f"Ray failed the sampler's {name}: {type(e).__name__}: {_first_line(e)}"
             ) from None
 
 
@@ -165,7 +187,7 @@ class RayBackend:
         self._check_nodes(force=True)
         self.pool.top_up()
         if version != self.version:
-            self.weights_ref = [ray.put(weights)]
+            self.weights_ref = [self._put(weights)]
             self.version = version
         fragments: list[Fragment] = []
         answered: set[int] = set()  # actors that delivered or failed this iteration
@@ -201,6 +223,23 @@ class RayBackend:
             if self.mode == "pipelined":
                 self._request(i)  # sample the next fragment while the learner updates
         return fragments
+
+    def _put(self, weights: dict[str, np.ndarray]) -> ray.ObjectRef:
+        """The weights in Ray's object store, retried while Ray refuses them (a full store may
+        spill; a full disk may be cleared); ClusterFailing after PUT_PATIENCE seconds."""
+        start = time.monotonic()
+        while True:
+            try:
+                return ray.put(weights)
+            except RayError as e:
+                if time.monotonic() - start > PUT_PATIENCE:
+                    raise ClusterFailing(
+                        f"Ray refused the policy weights for {PUT_PATIENCE:.0f} s: "
+                        f"{type(e).__name__}: {_first_line(e)}"
+                    ) from None
+                if self.should_stop():
+                    raise StopRequested from None
+                time.sleep(1.0)
 
     def _request_idle(self, answered: set[int]) -> None:
         """Ask every pool actor that has no fragment in flight and has not answered yet."""
@@ -241,6 +280,9 @@ class RayBackend:
             cause = getattr(e, "cause", None)
             reason = "sampler" if isinstance(cause, SamplerUnavailable) else "env_error"
             self._fragment_error(i, reason, f"{type(cause).__name__}: {str(cause)[:200]}")
+            return None
+        except RayError as e:  # Ray failed the fragment: disk, memory, (de)serialization
+            self._fragment_error(i, "ray_error", f"{type(e).__name__}: {_first_line(e)}")
             return None
         self.failing.discard(i)
         self.errors_in_a_row = 0
@@ -307,3 +349,7 @@ class RayBackend:
         self.pending.clear()
         self.sent.clear()
         self.pool.close()
+
+
+def _first_line(e: Exception) -> str:
+    return (str(e).strip().splitlines() or [""])[0][:200]
