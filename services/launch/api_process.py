@@ -10,7 +10,7 @@ from pathlib import Path
 
 import httpx
 
-from services.launch.processes import die_with_parent, stop_process
+from services.launch.processes import dying_with_parent, stop_process
 
 
 class ApiProcess:
@@ -34,21 +34,22 @@ class ApiProcess:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         with self.log_path.open("ab") as log:
             self.process = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "services.cli",
-                    "api",
-                    "--host",
-                    self.host,
-                    "--port",
-                    str(self.port),
-                ],  # fmt: skip
+                dying_with_parent(  # it dies with the launcher
+                    [
+                        sys.executable,
+                        "-m",
+                        "services.cli",
+                        "api",
+                        "--host",
+                        self.host,
+                        "--port",
+                        str(self.port),
+                    ]
+                ),  # fmt: skip
                 env=env,
                 stdout=log,
                 stderr=subprocess.STDOUT,
                 start_new_session=True,  # Ctrl-C reaches the launcher, which stops this
-                preexec_fn=die_with_parent(),  # and it dies with the launcher
             )
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

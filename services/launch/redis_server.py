@@ -14,7 +14,7 @@ from pathlib import Path
 
 import redis
 
-from services.launch.processes import die_with_parent, free_port, stop_process
+from services.launch.processes import dying_with_parent, free_port, stop_process
 
 
 def redis_server_binary() -> str:
@@ -74,11 +74,10 @@ class EmbeddedRedis:
             port = self.port if fixed else free_port()
             conf = self._write_config(port)
             process = subprocess.Popen(
-                [redis_server_binary(), str(conf)],
+                dying_with_parent([redis_server_binary(), str(conf)]),  # with the launcher
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
                 start_new_session=True,  # Ctrl-C in the terminal reaches the launcher only
-                preexec_fn=die_with_parent(),  # and it dies with the launcher
             )
             if _serving(process, port, self.password, timeout):
                 self.process, self.port = process, port
