@@ -57,6 +57,7 @@ DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
 SCREEN_MARK = ("<!-- screens -->", "<!-- /screens -->")
 SPEED_MARK = ("<!-- speed -->", "<!-- /speed -->")
+SKILL_MARK = ("<!-- skills -->", "<!-- /skills -->")
 SCREENS = RESULTS / "humanoid_screens"
 SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 
@@ -80,12 +81,14 @@ def _table(header, rows) -> str:
     return tabulate(list(rows), headers=list(header), tablefmt="github", disable_numparse=True)
 
 
-def training_wall_clock(run: Path) -> float:
-    """Seconds of training in a run's metrics.jsonl, pauses between sessions left out."""
+def training_wall_clock(run: Path, up_to: int | None = None) -> float:
+    """Seconds of training in a run's metrics.jsonl (of a run directory, or of the run a
+    checkpoint file belongs to) up to iteration `up_to`, pauses between sessions left out."""
+    run_dir = run.parent.parent if run.is_file() else run  # RUN/checkpoints/ckpt_N.pt
     times = []
-    for line in (run / "metrics.jsonl").read_text().splitlines():
+    for line in (run_dir / "metrics.jsonl").read_text().splitlines():
         row = json.loads(line)
-        if "iteration" in row and "time" in row:
+        if "iteration" in row and "time" in row and (up_to is None or row["iteration"] <= up_to):
             times.append(row["time"])
     gaps = np.diff(np.asarray(times))
     return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
@@ -121,7 +124,7 @@ def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
         "eval_seed": seed,
         "env_steps": steps,
         "iteration": state["progress"]["iteration"],
-        "training_wall_clock_s": training_wall_clock(run),
+        "training_wall_clock_s": training_wall_clock(run, state["progress"]["iteration"]),
         "target": {
             "no_fall": no_fall,
             "body_error_m": error,
@@ -185,7 +188,8 @@ def evaluate_skill(run: Path, tries: int) -> dict:
     steps = int(state["progress"]["env_steps"])
     return {
         "config": cfg.name, "clip": clip_name, "train_seed": cfg.train.seed,
-        "env_steps": steps, "training_wall_clock_s": training_wall_clock(run),
+        "env_steps": steps,
+        "training_wall_clock_s": training_wall_clock(run, state["progress"]["iteration"]),
         "clip_com_rise_m": clip_rise, "clip_rotation_rad": clip_angle,
         "success_share": success, "stood_share": float(np.mean([t["stood"] for t in tries_out])),
         "mean_rise_m": float(np.mean([t["rise"] for t in tries_out])),
@@ -320,11 +324,65 @@ def table() -> dict:
         | {k: r["report"][k] for k in SCREEN_KEYS}
         for r in screens
     ]
+    out["skills"] = _skills()
     (RESULTS / "humanoid.json").write_text(json.dumps(out, indent=2))
     _write_docs(rows)
+    _write_section(SKILL_MARK, _skills_table(out["skills"]))
     _write_section(SCREEN_MARK, _screens_table(out["screens"]))
     _write_section(SPEED_MARK, _speed_table())
     return out
+
+
+def _skills() -> dict:
+    """Every one-shot skill evaluation (`skill RUN`) by config and seed; the latest evaluation
+    within the budget of each seed is the one judged."""
+    out: dict[str, dict] = {}
+    for path in sorted(RESULTS.glob("humanoid_*_skill_s*_*k.json")):
+        r = json.loads(path.read_text())
+        keep = {
+            k: r[k]
+            for k in (
+                "train_seed",
+                "env_steps",
+                "training_wall_clock_s",
+                "success_share",
+                "stood_share",
+                "mean_body_error",
+                "met",
+            )
+        }
+        out.setdefault(r["config"], {"clip": r["clip"], "target": r["target"], "runs": []})
+        out[r["config"]]["runs"].append(keep)  # fmt: skip
+    for config in out.values():
+        latest: dict[int, dict] = {}
+        for r in sorted(config["runs"], key=lambda r: r["env_steps"]):
+            latest[r["train_seed"]] = r
+        config["seeds"] = sorted(latest)
+        config["met"] = len(latest) >= 3 and all(r["met"] for r in latest.values())
+        config["mean_success"] = float(np.mean([r["success_share"] for r in latest.values()]))
+    return out
+
+
+def _skills_table(skills: dict) -> str:
+    header = ["config", "seed", "env steps", "budget", "training wall-clock", "tries succeed",
+              "stand 1 s past the end", "body error (m)", "target", "met"]  # fmt: skip
+    lines, verdicts = [], []
+    for config, c in sorted(skills.items()):
+        t = c["target"]
+        for r in sorted(c["runs"], key=lambda r: (r["train_seed"], r["env_steps"])):
+            lines.append([
+                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
+                f"{t['env_steps'] / 1e6:.0f}M", f"{r['training_wall_clock_s'] / 60:.0f} min",
+                f"{100 * r['success_share']:.0f} %", f"{100 * r['stood_share']:.0f} %",
+                f"{r['mean_body_error']:.3f}", f"{100 * t['share']:.0f} % ({t['kind']})",
+                "yes" if r["met"] else "no",
+            ])  # fmt: skip
+        verdict = "met" if c["met"] else "not yet met"
+        verdicts.append(
+            f"- {config}: seeds {c['seeds']} evaluated; mean success of the latest "
+            f"{100 * c['mean_success']:.0f} %; the 3-seed target is {verdict}."
+        )
+    return _table(header, lines) + "\n\n" + "\n".join(verdicts)
 
 
 def _speed_table() -> str:

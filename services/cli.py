@@ -440,8 +440,7 @@ def play(
     cfg, policy, state = _load_policy(run)
     token = secrets.token_urlsafe(16)
     console.print(
-        f"play: http://{host}:{port}/?token={token}  ({cfg.name}, {cfg.character}; Ctrl-C to "
-        "stop)",
+        f"play: http://{host}:{port}/?token={token}  ({cfg.name}, {cfg.character}; Ctrl-C to stop)",
         soft_wrap=True,
     )
     serve(cfg, policy, state, host, port, token)
