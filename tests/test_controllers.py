@@ -31,6 +31,7 @@ def test_a_run_ships_as_a_controller_that_eval_takes_by_name(tmp_path):
         assert res.returncode == 0, res.stdout + res.stderr
         path = controllers.find(name)
         assert path is not None and path.parent == controllers.directory()
+        assert path.stat().st_mode & 0o777 == 0o644  # an installed file every user can read
         full = checkpoint.resolve(run)
         assert path.stat().st_size < full.stat().st_size / 2  # no optimizer, no sampler state
         state = checkpoint.read(path)  # plain data: loads with weights_only

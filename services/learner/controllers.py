@@ -50,6 +50,7 @@ def add(run: Path, name: str, folder: Path | None = None) -> Path:
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=checkpoint.SUFFIX)
     with os.fdopen(fd, "wb") as f:
         torch.save(checkpoint.encode(state), f)
+    os.chmod(tmp, 0o644)  # mkstemp's 0600 would keep a shipped file from other users
     os.replace(tmp, path)
     checkpoint.read(path)  # it loads back as plain data
     return path
