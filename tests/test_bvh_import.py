@@ -3,6 +3,7 @@ against the source through MuJoCo's kinematics."""
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -173,6 +174,19 @@ def test_a_walk_becomes_a_gait_cycle_that_loops():
     env = env_for(cfg)
     assert 0.5 < env.clip_speed < 2.0  # m/s: a walk
     env.reset(seed=0)
+
+
+def test_the_shipped_cmu_walk_is_what_the_importer_writes():
+    """paramimic/data/cmu's clip is the shared file's gait cycle as `clip import --loop` writes
+    it (its README's command), and it is the built-in clip humanoid_cmu_walk."""
+    from paramimic.characters.humanoid import CLIPS, humanoid_clip
+
+    walk = import_bvh(CMU_FILE, start=1.5, end=6.5, loop=True)
+    shipped = json.loads(CLIPS["cmu_walk"].read_text())
+    assert shipped["Loop"] == "wrap"
+    np.testing.assert_allclose(np.asarray(shipped["Frames"]), walk.frames, atol=1e-7)
+    clip = humanoid_clip("cmu_walk")
+    assert clip.name == "humanoid_cmu_walk" and clip.loop == "wrap"
 
 
 @pytest.mark.parametrize("clip", ["walk", "run", "jump", "backflip", "cartwheel"])

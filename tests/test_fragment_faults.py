@@ -13,6 +13,7 @@ import ray
 from conftest import wait_until
 
 from paramimic.config import ExperimentConfig
+from paramimic.training import checkpoint
 from paramimic.training.trainer import StopRequested
 from services.actors.rollout_actor import RolloutActor
 from services.learner.ray_backend import FragmentsFailing, SamplerClient, SamplerFailed
@@ -33,15 +34,17 @@ def _cfg(**actors) -> ExperimentConfig:
 
 @ray.remote(num_cpus=1, max_restarts=-1)
 class FlakyActor(RolloutActor.__ray_actor_class__):
-    """A rollout actor whose env raises on every `every`-th call (every = 1: always)."""
+    """A rollout actor whose env raises on every `every`-th call (every = 1: always), or on
+    every call after its first `after` ones."""
 
-    def __init__(self, *args, every: int = 3, **kw) -> None:
+    def __init__(self, *args, every: int = 3, after: int | None = None, **kw) -> None:
         super().__init__(*args, **kw)
-        self.calls, self.every = 0, every
+        self.calls, self.every, self.after = 0, every, after
 
     def sample(self, *args, **kw):
         self.calls += 1
-        if self.calls % self.every == 0:
+        broken = self.calls > self.after if self.after is not None else False
+        if broken or (self.after is None and self.calls % self.every == 0):
             raise FloatingPointError("mujoco: simulation unstable (injected)")
         return super().sample(*args, **kw)
 
@@ -82,7 +85,7 @@ class RayFailingActor(RolloutActor.__ray_actor_class__):
         return super().sample(*args, **kw)
 
 
-def _flaky(every: int, actor=FlakyActor):
+def _flaky(every: int, actor=FlakyActor, **more):
     class Options:  # spawner calls actor_class.options(...).remote(...)
         @staticmethod
         def options(**opts):
@@ -91,7 +94,7 @@ def _flaky(every: int, actor=FlakyActor):
             class Remote:
                 @staticmethod
                 def remote(*args):
-                    return inner.remote(*args, every=every)
+                    return inner.remote(*args, every=every, **more)
 
             return Remote
 
@@ -121,12 +124,34 @@ def test_fragments_ray_fails_are_dropped_and_training_goes_on(distributed, tmp_p
     assert "RaySystemError" in said or "UnserializableException" in said
 
 
+def _final_checkpoint_is_the_runs(trainer, run_dir) -> dict:
+    """The run's latest.pt is the state it stopped in: its manifest matches, it loads, and it
+    is at the iteration training reached."""
+    latest = checkpoint.checkpoint_dir(run_dir) / checkpoint.LATEST
+    assert checkpoint.verify(latest)  # a manifest, and the file matches it
+    state = checkpoint.load(run_dir)
+    assert state["progress"]["iteration"] == trainer.progress.iteration
+    assert state["progress"]["env_steps"] == trainer.progress.env_steps
+    return state
+
+
 def test_a_persistent_env_error_stops_with_the_reason(distributed, tmp_path):
     cfg = _cfg(max_fragment_errors=4)
     trainer, backend = distributed(cfg, tmp_path, actor_class=_flaky(1))
     with pytest.raises(FragmentsFailing, match="simulation unstable"):
         trainer.train(backend, total_steps=4 * 256)
     assert trainer.progress.iteration == 0
+
+
+def test_an_env_that_breaks_mid_run_stops_with_its_final_checkpoint(distributed, tmp_path):
+    """Good iterations first, then every fragment fails: FragmentsFailing, and the final
+    checkpoint (checkpoint_every is 100: only the way out writes one) holds those iterations."""
+    cfg = _cfg(max_fragment_errors=4)
+    trainer, backend = distributed(cfg, tmp_path, actor_class=_flaky(1, after=3))
+    with pytest.raises(FragmentsFailing, match="simulation unstable"):
+        trainer.train(backend, total_steps=50 * 256)
+    assert trainer.progress.iteration >= 2
+    _final_checkpoint_is_the_runs(trainer, tmp_path)
 
 
 def test_a_hung_actor_is_killed_and_replaced(distributed, tmp_path):
@@ -171,6 +196,31 @@ def test_a_stop_request_ends_the_wait_for_actors(distributed, tmp_path):
     finally:
         for pid in pids:
             os.kill(pid, signal.SIGCONT)
+
+
+def test_a_sampler_that_hangs_mid_run_stops_training_with_a_checkpoint(distributed, tmp_path):
+    """The sampler stops answering between iterations: training ends with SamplerFailed within
+    the timeouts, and the newest checkpoint loads (the final one when it could be written
+    without the sampler; else the last periodic one, which is what the launcher then says)."""
+    cfg = _cfg(sampler_timeout=2.0, fragment_timeout=10.0, max_fragment_errors=4)
+    cfg.train.checkpoint_every = 1
+    trainer, backend = distributed(cfg, tmp_path)
+    trainer.train(backend, total_steps=2 * 256)
+    done = trainer.progress.iteration
+    assert checkpoint.load(tmp_path)["progress"]["iteration"] == done
+    pid = ray.get(trainer.curriculum.handle.pid.remote())
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        start = time.monotonic()
+        with pytest.raises(SamplerFailed, match="within 2 s"):
+            trainer.train(backend, total_steps=50 * 256)
+        assert time.monotonic() - start < 90
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    latest = checkpoint.checkpoint_dir(tmp_path) / checkpoint.LATEST
+    assert checkpoint.verify(latest)
+    state = checkpoint.load(tmp_path)
+    assert done <= state["progress"]["iteration"] <= trainer.progress.iteration
 
 
 def test_a_hung_sampler_is_a_sampler_failure(distributed, tmp_path):

@@ -599,10 +599,10 @@ _END_SITES = {"neck": (0.0, 0.25, 0.0), "right_ankle": (0.1335, -0.05, 0.0),
 def clip_frames(clip: str) -> np.ndarray:
     """The DeepMimic frames [n, 44] of a humanoid clip: a built-in name (humanoid_walk, ...) or
     a clip file, checked as `env.clip` reads it."""
-    from paramimic.characters.humanoid import CLIPS, DATA
+    from paramimic.characters.humanoid import CLIPS
 
     name = clip.removeprefix("humanoid_")
-    path = DATA / f"humanoid3d_{CLIPS[name]}.txt" if name in CLIPS else Path(clip)
+    path = CLIPS[name] if name in CLIPS else Path(clip)
     text = path.read_text()
     load_deepmimic(Path(str(path)), text=text)  # it parses as a clip
     return np.asarray(json.loads(text)["Frames"], np.float64)

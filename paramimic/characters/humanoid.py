@@ -300,17 +300,20 @@ def _shape_dims(b: dict) -> tuple[dict, dict[str, list[float]]]:
 HUMANOID = HumanoidDef()
 
 
-# shipped in data/deepmimic: clip name -> DeepMimic's file (humanoid3d_<file>.txt)
-CLIPS = {name: name for name in ("walk", "run", "jump", "backflip", "cartwheel")}
-CLIPS["dance"] = "dance_b"  # in place, looping: [WL19] Fig. 2c
+# shipped clips: name -> its file (humanoid3d_<file>.txt in DeepMimic's format); DeepMimic's in
+# data/deepmimic, one imported from the shared CMU BVH file by `paramimic clip import` in data/cmu
+CLIPS = {name: DATA / f"humanoid3d_{name}.txt"
+         for name in ("walk", "run", "jump", "backflip", "cartwheel")}  # fmt: skip
+CLIPS["dance"] = DATA / "humanoid3d_dance_b.txt"  # in place, looping: [WL19] Fig. 2c
+CLIPS["cmu_walk"] = DATA.parent / "cmu" / "humanoid3d_cmu_walk.txt"  # a user's mocap, imported
 
 
 def humanoid_clip(name: str) -> Clip:
-    """A shipped DeepMimic humanoid3d clip by name: walk, run, jump, backflip, cartwheel,
-    dance."""
+    """A shipped humanoid3d clip by name: DeepMimic's walk, run, jump, backflip, cartwheel and
+    dance, and cmu_walk (the shared CMU BVH walk as `paramimic clip import --loop` imports it)."""
     if name not in CLIPS:
         raise KeyError(f"no humanoid clip {name!r}; shipped: {', '.join(CLIPS)}")
-    return load_deepmimic(DATA / f"humanoid3d_{CLIPS[name]}.txt", name=f"humanoid_{name}")
+    return load_deepmimic(CLIPS[name], name=f"humanoid_{name}")
 
 
 HUMANOID_REGISTRATION = Registration(
