@@ -65,7 +65,7 @@ SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 TARGETS = {
     "humanoid_walk": (0.95, 0.06, 0.10, 20_000_000),
     "humanoid_run": (0.95, 0.06, 0.10, 18_000_000),
-    # the imported CMU walk (Part 18's target): the walk's targets within 1.5x the samples the
+    # the imported CMU walk: the walk's targets within 1.5x the samples the
     # walk's seeds met them at (6.10M at most)
     "humanoid_cmu_walk": (0.95, 0.06, 0.10, 9_150_000),
 }
