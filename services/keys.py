@@ -49,7 +49,10 @@ class RunKeys:
         self.progress = f"{base}:progress"
         self.history = f"{base}:history"
         self.curriculum = f"{base}:curriculum"
-        self.seen = f"{base}:seen"
+        self.seen = f"{base}:seen"  # the ids of the episodes the sampler counted
+        # the ids of the episodes whose samples reached the learner, and how many arrived (a
+        # count above the set's size: an episode learned twice)
+        self.learned = f"{base}:learned"
         self.traces = self.part("traces")
         self.samples = f"{base}:samples"
         self.events = f"{base}:events"

@@ -214,3 +214,27 @@ def screenshots(tmp_path_factory):
     path = Path(where) if where else tmp_path_factory.mktemp("screenshots")
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def compose_learner_health(run_dir, max_age: float):
+    """The compose learner's own healthcheck command (deploy/docker-compose.yml), its
+    `paramimic health` part, run in a shell as the container runs it, on `run_dir` (for
+    /runs/$RUN_NAME) with `max_age` for its 600 s; the completed process."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import yaml
+
+    compose = Path(__file__).resolve().parents[1] / "deploy" / "docker-compose.yml"
+    test = yaml.safe_load(compose.read_text())["services"]["learner"]["healthcheck"]["test"]
+    assert test[0] == "CMD-SHELL"
+    [command] = [c.strip() for c in test[1].split("&&") if c.strip().startswith("paramimic")]
+    command = command.replace("$$", "$").replace("/runs/", f"{Path(run_dir).parent}/")
+    command, n = re.subn(r"--max-age \d+", f"--max-age {max_age:g}", command)
+    assert n == 1, command
+    env = os.environ | {"RUN_NAME": Path(run_dir).name,
+                        "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}  # fmt: skip
+    return subprocess.run(["sh", "-c", command], capture_output=True, text=True, timeout=120,
+                          env=env)  # fmt: skip

@@ -18,7 +18,7 @@ import psutil
 import pytest
 import redis
 import yaml
-from conftest import holds, wait_until
+from conftest import compose_learner_health, holds, wait_until
 
 from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis
@@ -39,11 +39,12 @@ TINY = {
 class Launch:
     """`paramimic train` in a subprocess; its output and every descendant process it had."""
 
-    def __init__(self, tmp_path, *args, **train):
+    def __init__(self, tmp_path, *args, extra_env: dict | None = None, **train):
         cfg = tmp_path / "tiny.yaml"
         cfg.write_text(yaml.safe_dump({**TINY, "train": {**TINY["train"], **train}}))
         self.run_dir = tmp_path / "run"
         env = os.environ | {"PARAMIMIC_API_TOKEN": TOKEN, "COLUMNS": "200", "RAY_ADDRESS": ""}
+        env |= extra_env or {}
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -210,12 +211,10 @@ def test_one_command_run_with_api_control_stopped_by_sigterm(tmp_path):
         )
         held = c.get(f"/runs/{run}/progress").json()["iteration"]
         holds(lambda: c.get(f"/runs/{run}/progress").json()["iteration"] == held, 2.0, "pause")
-        # a paused learner is alive to its healthcheck: it owns the run and keeps moving
-        health = subprocess.run(
-            [sys.executable, "-m", "services.cli", "health", str(launch.run_dir), "--max-age",
-             "30"], capture_output=True, text=True, timeout=60,
-        )  # fmt: skip
-        assert health.returncode == 0, health.stdout
+        # a paused learner is alive to its healthcheck (the compose file's own command): it
+        # owns the run and keeps moving
+        health = compose_learner_health(launch.run_dir, max_age=30)
+        assert health.returncode == 0, health.stdout + health.stderr
         # k is applied while paused; resume goes on
         assert c.put(f"/runs/{run}/curriculum/k", json={"k": 0}, headers=auth).status_code == 202
         wait_until(
@@ -372,6 +371,75 @@ def test_a_run_has_one_owner_and_a_killed_launcher_takes_its_children(
         lambda: httpx.get(f"{api_url}/runs/lease-run/progress").json()["status"] == "stale",
         30, "the killed learner's run to show as stale",
     )  # fmt: skip
+
+
+def test_a_laptop_runs_redis_killed_is_restarted_by_the_launcher_and_training_goes_on(tmp_path):
+    """SIGKILL of the embedded Redis: the launcher (not a test or a benchmark) starts it again
+    on its port and AOF within seconds, the learner keeps its lease, and training goes on."""
+    launch = Launch(tmp_path, "--no-api")
+    log = launch.run_dir / "metrics.jsonl"
+    rows = lambda: len(log.read_text().splitlines()) if log.exists() else 0  # noqa: E731
+    try:
+        wait_until(lambda: rows() >= 3, 180, "3 iterations")
+        [server] = [p for p, name in launch.descendants.items()
+                    if name == "redis-server" and _alive(p)]  # fmt: skip
+        server.kill()
+        wait_until(lambda: "restarted on its port" in launch.output(), 30, "the restart")
+        done = rows()
+        wait_until(lambda: rows() >= done + 3, 120, "3 more iterations")
+        assert launch.proc.poll() is None, launch.output()
+        assert "lease lost" not in launch.output()
+        restarted = [p for p, name in launch.descendants.items()
+                     if name == "redis-server" and _alive(p)]  # fmt: skip
+        assert len(restarted) == 1 and restarted[0].pid != server.pid
+        launch.proc.send_signal(signal.SIGINT)
+        assert launch.wait(120) == 0, launch.output()
+    finally:
+        if launch.proc.poll() is None:
+            launch.proc.kill()
+    assert launch.leftovers() == []
+
+
+def test_a_second_learner_of_the_same_run_id_is_refused_by_the_redis_lease(tmp_path, redis_server):
+    """Two run directories (two machines' disks, so no shared file lock) of one run id on one
+    Redis: the second learner is refused by the lease before it writes anything, and the
+    first trains on."""
+    import shutil
+
+    here = {"REDIS_URL": redis_server.url}
+    (tmp_path / "a").mkdir()
+    first = Launch(tmp_path / "a", "--no-api", extra_env=here)
+    try:
+        ckpt = first.run_dir / "checkpoints" / "latest.pt"
+        wait_until(lambda: ckpt.exists() or first.proc.poll() is not None, 180, "a checkpoint")
+        assert first.proc.poll() is None, first.output()
+        run_id = (first.run_dir / "run_id").read_text().strip()
+        client = redis.Redis.from_url(redis_server.url, decode_responses=True)
+        keys = RunKeys(run_id)
+        owner = client.get(keys.lease)
+        assert owner
+        (tmp_path / "b").mkdir()
+        copy = tmp_path / "b" / "run"
+        shutil.copytree(first.run_dir, copy, ignore=shutil.ignore_patterns(".lock", "heartbeat"))
+        before = client.hgetall(keys.meta)
+        files = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+        second = Launch(tmp_path / "b", "--resume", "--no-api", extra_env=here)
+        assert second.wait(120) == 2, second.output()
+        assert f"run {run_id} is being trained by another learner" in second.output()
+        assert client.get(keys.lease) == owner  # still the first's
+        meta = client.hgetall(keys.meta)
+        assert meta.get("status") == before.get("status") == "running"
+        # nothing written into its run directory: no row, no checkpoint
+        assert {p: p.read_bytes() for p in files} == files
+        assert not list((copy / "checkpoints").glob("ckpt_*.pt")) or set(
+            (copy / "checkpoints").glob("ckpt_*.pt")
+        ) <= set(files)
+        it = int(client.hget(keys.progress, "iteration"))
+        wait_until(lambda: int(client.hget(keys.progress, "iteration")) > it, 120,
+                   "the first learner to train on")  # fmt: skip
+    finally:
+        first.proc.kill()
+        first.proc.wait(30)
 
 
 def _cmdline(p: psutil.Process) -> list[str]:

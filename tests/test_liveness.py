@@ -5,11 +5,12 @@ learner that stopped moving (hung inside an iteration) fail it."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
 
-from conftest import wait_until
+from conftest import compose_learner_health, wait_until
 
 from services.launch.liveness import HEARTBEAT, LOCK_FILE, beat
 
@@ -42,11 +43,42 @@ def test_health_fails_unless_a_learner_holds_the_run_and_moves(tmp_path):
         res = _health(run)
         assert res.returncode == 0 and "alive" in res.stdout
         stale = time.time() - 900
-        os.utime(run / HEARTBEAT, (stale, stale))
-        (run / HEARTBEAT).write_text(f"{stale}\n")  # a learner hung for 15 minutes
+        (run / HEARTBEAT).write_text(f"{stale}\n")  # a learner hung for 15 minutes: the
+        os.utime(run / HEARTBEAT, (stale, stale))  # file neither rewritten nor touched since
         res = _health(run, max_age=600)
-        assert res.returncode == 1 and "has not moved for 900 s" in res.stdout
+        assert res.returncode == 1 and re.search("has not moved for 9[0-9][0-9] s", res.stdout)
     finally:
         holder.kill()
         holder.wait()
     wait_until(lambda: _health(run).returncode == 1, 30, "the lock to be free again")
+
+
+def test_the_compose_healthcheck_runs_this_check(tmp_path):
+    """deploy/docker-compose.yml's learner healthcheck command itself, in a shell: it fails on a
+    missing run directory, on a free lock and on a learner that stopped moving, and passes
+    on one that holds the run and moves."""
+    run = tmp_path / "compose"
+    res = compose_learner_health(run, 600)
+    assert res.returncode == 1 and "no run directory" in res.stdout, res.stdout + res.stderr
+    run.mkdir()
+    (run / LOCK_FILE).touch()
+    assert compose_learner_health(run, 600).returncode == 1
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
+         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(600)",
+         str(run / LOCK_FILE)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        beat(run)
+        res = compose_learner_health(run, 600)
+        assert res.returncode == 0, res.stdout + res.stderr
+        stale = time.time() - 900
+        (run / HEARTBEAT).write_text(f"{stale}\n")
+        os.utime(run / HEARTBEAT, (stale, stale))
+        res = compose_learner_health(run, 600)
+        assert res.returncode == 1 and re.search("has not moved for 9[0-9][0-9] s", res.stdout)
+    finally:
+        holder.kill()
+        holder.wait()

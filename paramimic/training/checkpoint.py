@@ -116,12 +116,14 @@ def save(run_dir: Path, state: dict, iteration: int, keep: int | None = None) ->
         stale.unlink(missing_ok=True)
     path = d / f"ckpt_{iteration:06d}.pt"
     fd, tmp = tempfile.mkstemp(dir=d, prefix=TMP_PREFIX, suffix=".pt")
+    placed = False
     try:
         with os.fdopen(fd, "wb") as f:
             torch.save(encode(state), f)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        placed = True
         _write_manifest(path)
         latest_tmp = d / f"{TMP_PREFIX}latest-{os.getpid()}"
         latest_tmp.unlink(missing_ok=True)
@@ -130,6 +132,8 @@ def save(run_dir: Path, state: dict, iteration: int, keep: int | None = None) ->
         _write_manifest(d / LATEST)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
+        if placed and not _manifest(path).is_file():  # no file without its manifest (full disk)
+            path.unlink(missing_ok=True)
         raise
     _fsync_dir(d)
     if keep is not None:  # by iteration number (names sort as strings past 999,999)

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -147,6 +148,7 @@ class Trainer:
         self.progress = Progress()
         self._consistent = True  # False while an update is changing the state
         self.bad_updates = 0  # updates in a row with skipped non-finite steps
+        self.episode_ids: list[str] = []  # the episodes the last iteration learned from
 
     # --- state --------------------------------------------------------------------------------
 
@@ -260,6 +262,7 @@ class Trainer:
         gradient_steps = cfg.ppo.num_epochs * max(1, len(batch.obs) // cfg.ppo.minibatch_size)
         metrics["marginal_loss"] = self.marginal.fit(batch.tasks, batch.values, gradient_steps)
         episodes = [e for f in fragments for e in f.episodes]
+        self.episode_ids = [e.episode_id for e in episodes]  # the run's reporter records them
         steps = sum(f.num_steps for f in fragments)
         self.progress.iteration += 1
         self.progress.env_steps += steps
@@ -301,8 +304,8 @@ class Trainer:
             "edge_env_steps": sum(r.length for r in results),
         }
 
-    def _metrics_log(self):
-        """metrics.jsonl opened to append, without the rows of iterations this run's state never
+    def _metrics_log(self) -> MetricsLog:
+        """metrics.jsonl to append to, without the rows of iterations this run's state never
         saw: a run stopped between checkpoints resumes from the last one, and the iterations
         after it, logged but lost, would otherwise stay in its curve twice."""
         path = self.run_dir / "metrics.jsonl"
@@ -313,7 +316,7 @@ class Trainer:
                 tmp = path.with_suffix(".tmp")
                 tmp.write_text("".join(kept))
                 tmp.replace(path)
-        return path.open("a")
+        return MetricsLog(path)
 
     def train(
         self,
@@ -376,7 +379,6 @@ class Trainer:
                     break
                 check_write()
                 log.write(json.dumps(m) + "\n")
-                log.flush()
                 if on_metrics:
                     on_metrics(m)
                 if self.bad_updates >= self.cfg.train.max_bad_updates:
@@ -415,6 +417,43 @@ def train_serial(cfg: ExperimentConfig, steps: int, run_dir: Path | None = None)
     finally:
         backend.close()
     return trainer
+
+
+class MetricsLog:
+    """metrics.jsonl, appended a row per iteration. A row the disk has no room for is kept and
+    written with the next one (the file cut back to its last whole row): a full disk costs no
+    rows and does not end the run; it is warned about once per spell."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.pending: list[str] = []
+        self.failing = False
+
+    def write(self, row: str) -> None:
+        self.pending.append(row)
+        self.flush()
+
+    def flush(self) -> None:
+        if not self.pending:
+            return
+        size = self.path.stat().st_size if self.path.exists() else 0
+        try:
+            with self.path.open("a") as f:
+                f.write("".join(self.pending))
+        except OSError as e:
+            with contextlib.suppress(OSError):  # no half row left behind
+                os.truncate(self.path, size)
+            if not self.failing:
+                logging.getLogger(__name__).warning(
+                    f"{self.path} not written ({e}); its rows are kept and written once it can be"
+                )
+            self.failing = True
+            return
+        self.pending.clear()
+        self.failing = False
+
+    def close(self) -> None:
+        self.flush()
 
 
 def _logged_steps(row: str) -> float:

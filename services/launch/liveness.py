@@ -16,7 +16,9 @@ EVERY = 5.0  # s: the file is rewritten at most this often
 
 
 def beat(run_dir: Path) -> None:
-    """Refresh the liveness file (atomically: a reader never sees half of it)."""
+    """Refresh the liveness file (atomically: a reader never sees half of it). On a full disk
+    the file's time is touched instead (that needs no space; `problem` reads the later of the
+    two)."""
     path = Path(run_dir) / HEARTBEAT
     try:
         if time.time() - path.stat().st_mtime < EVERY:
@@ -24,8 +26,13 @@ def beat(run_dir: Path) -> None:
     except FileNotFoundError:
         pass
     tmp = path.with_name(f".{HEARTBEAT}-{os.getpid()}")
-    tmp.write_text(f"{time.time():.3f}\n")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(f"{time.time():.3f}\n")
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        if path.exists():
+            os.utime(path)
 
 
 def problem(run_dir: Path, max_age: float) -> str | None:
@@ -45,8 +52,9 @@ def problem(run_dir: Path, max_age: float) -> str | None:
         else:
             fcntl.flock(f, fcntl.LOCK_UN)
             return f"no learner owns {run_dir} (its lock is free)"
+    path = run_dir / HEARTBEAT
     try:
-        age = time.time() - float((run_dir / HEARTBEAT).read_text())
+        age = time.time() - max(float(path.read_text()), path.stat().st_mtime)
     except (OSError, ValueError):
         return f"{run_dir} has no liveness file yet"
     if age > max_age:

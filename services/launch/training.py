@@ -12,6 +12,7 @@ import fcntl
 import os
 import re
 import signal
+import threading
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -121,9 +122,6 @@ def run_training(cfg: ExperimentConfig, opts: LaunchOptions, console: Console) -
         check_redis(opts.redis_url)
     run_dir.mkdir(parents=True, exist_ok=True)
     lock = lock_run_dir(run_dir)  # held until this process exits, however it exits
-    (run_dir / "config.yaml").write_text(
-        yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
-    )
     stop = StopFlag(console)
     handlers = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     run = Run(cfg, run_dir, state, stop, console)
@@ -170,8 +168,17 @@ class Run:
     console: Console
 
 
+def write_run_config(run: Run) -> None:
+    """config.yaml in the run directory: written once the run is this learner's (its lock and,
+    in Redis, its lease), so a learner refused the run writes nothing."""
+    (run.run_dir / "config.yaml").write_text(
+        yaml.safe_dump(run.cfg.model_dump(mode="json"), sort_keys=False)
+    )
+
+
 def _train_serial(run: Run) -> int:
     cfg, run_dir, state, stop, console = run.cfg, run.run_dir, run.state, run.stop, run.console
+    write_run_config(run)
     trainer = Trainer(cfg, run_dir)
     if state is not None:
         trainer.load_state_dict(state)
@@ -233,6 +240,7 @@ class DistributedRun:
         self.console, self.stop = run.console, run.stop
         self.redis_url = opts.redis_url
         self.embedded_redis = None
+        self.redis_lock = threading.Lock()
         self.api = None
         self.api_url: str | None = None
 
@@ -251,6 +259,17 @@ class DistributedRun:
         self.redis_url = server.start()
         self.services.callback(server.stop)
         self.console.print(f"Redis: embedded, {masked(self.redis_url)}, AOF in {server.data_dir}")
+        # watched every second, not between iterations: an iteration waits on Redis, and a
+        # Redis down for longer than 2/3 of the run's lease would cost the learner its lease
+        done = threading.Event()
+
+        def keep() -> None:
+            while not done.wait(1.0):
+                self.keep_redis_alive()
+
+        keeper = threading.Thread(target=keep, name="redis-keeper", daemon=True)
+        keeper.start()
+        self.services.callback(lambda: (done.set(), keeper.join(10)))
 
     def connect_ray(self) -> None:
         import ray
@@ -351,7 +370,7 @@ class DistributedRun:
         )
 
     def on_metrics(self, m: dict) -> None:
-        self.reporter.progress(m)
+        self.reporter.progress(m, self.trainer.episode_ids)
         for kind, message, data in self.backend.take_events():  # nodes lost and joined
             self.reporter.event(kind, message, {**data, "iteration": m["iteration"]})
             self.console.print(f"[yellow]{message}[/]")
@@ -375,13 +394,14 @@ class DistributedRun:
         """The embedded Redis died: start it again on its port and its AOF (the sampler and
         the reporter reconnect; what it had flushed is kept)."""
         server = self.embedded_redis
-        if server is None or server.process is None or server.process.poll() is None:
-            return
-        try:
-            server.start()
-        except RuntimeError as e:
-            self.console.print(f"[yellow]the embedded Redis exited and did not restart: {e}[/]")
-            return
+        with self.redis_lock:  # the keeper thread and the loop's `supervise`
+            if server is None or server.process is None or server.process.poll() is None:
+                return
+            try:
+                server.start()
+            except RuntimeError as e:
+                self.console.print(f"[yellow]the embedded Redis exited and did not restart: {e}[/]")
+                return
         self.console.print("[yellow]the embedded Redis had exited; restarted on its port[/]")
 
     def supervise(self, iteration: int) -> None:
@@ -396,7 +416,8 @@ class DistributedRun:
     def train(self) -> int:
         """Start everything, train; the exit code: 0 finished or stopped, else `_stops()`'."""
         for step in (self.start_watchdog, self.start_redis, self.connect_ray, self.own_run,
-                     self.start_stack, self.start_api):  # fmt: skip
+                     lambda: write_run_config(self.run), self.start_stack,
+                     self.start_api):  # fmt: skip
             step()
         cfg, trainer, stop, stops = self.run.cfg, self.trainer, self.stop, _stops()
         beat(self.run.run_dir)

@@ -8,6 +8,7 @@ import secrets
 import socket
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from paramimic.characters import registration
@@ -189,9 +190,10 @@ class RunReporter:
 
         self._write(ops)
 
-    def progress(self, m: dict) -> None:
+    def progress(self, m: dict, episode_ids: Sequence[str] = ()) -> None:
         """Progress and one history record per iteration, in one transaction. A resumed run
-        overwrites the records after its checkpoint."""
+        overwrites the records after its checkpoint. `episode_ids`: the episodes this iteration
+        learned from, added to the run's learned set (and counted, so a duplicate shows)."""
         keys, it = self.keys, int(m["iteration"])
         record = finite(m)  # JSON has no NaN/inf: they become null
         fields = {k: dumps(record.get(k)) for k in PROGRESS_FIELDS}
@@ -204,6 +206,9 @@ class RunReporter:
             pipe.zremrangebyscore(keys.history, it, "+inf")
             pipe.zadd(keys.history, {dumps(record): it})
             pipe.zremrangebyrank(keys.history, 0, -HISTORY_LIMIT - 1)
+            if episode_ids:
+                pipe.sadd(keys.learned, *episode_ids)
+                pipe.hincrby(keys.meta, "learned_episodes", len(episode_ids))
             if restarts > self.restarts_seen:
                 add_event(
                     pipe,
