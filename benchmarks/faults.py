@@ -1,6 +1,7 @@
-"""Fault injection: a real training job — `paramimic train` with a local Ray, the API
-and a Redis server this script owns (so that it can kill and restart it) — gets each fault
-injected several times at random moments; per fault it reports what happened.
+"""Fault injection: a real training job — `paramimic train` with a local Ray, the API and a
+Redis server (this script's, which it reads the run's state from; the `redis` row's job runs in
+laptop mode with its launcher's embedded one) — gets each fault injected several times at
+random moments; per fault it reports what happened.
 
 Faults: none (the control row: what a run without faults shows); SIGKILL of a rollout actor, of
 the sampler actor, of the API process, of the learner (then `--resume`); SIGKILL of the Redis
@@ -25,7 +26,7 @@ still alive 30 s later; Ray's processes included).
 
     python benchmarks/faults.py [--faults actor,sampler,...] [--times 3] [--seed 0]
 
-Writes benchmarks/results/faults.json. The job is an [L21] skill run on the planar walker
+Writes benchmarks/results/faults.json and its table into docs/security.md. The job is an [L21] skill run on the planar walker
 (configs/walker_jump.yaml, 2 actors x 4 envs, 1,024 steps per iteration, so that there are
 elites to lose), fragment timeout 10 s.
 """
@@ -247,7 +248,8 @@ class Suite:
         row["processes_left"] = sorted(n for job in jobs for n in job.left_behind(keep))
         row.update(self.counts(run_dir))
         if laptop:
-            self.client.shutdown(nosave=True)
+            with contextlib.suppress(redis.RedisError):
+                self.client.shutdown(nosave=True)
         if mounted:
             subprocess.run(["umount", "-l", str(run_dir)], check=False)
         return row
@@ -429,6 +431,35 @@ def table(rows: list[dict]) -> str:
     return _table(header, lines)
 
 
+DOCS = ROOT / "docs" / "security.md"
+MARK = ("<!-- faults -->", "<!-- /faults -->")
+
+
+def write_docs(result: dict) -> None:
+    """The table and what it adds up to, between docs/security.md's marks."""
+    rows = [r for r in result["rows"] if "outcomes" in r]
+    injected = sum(r["injected"] for r in rows)
+    went_on = sum(o.startswith(("continued", "resumed")) and "DAMAGED" not in o
+                  for r in rows if r["fault"] != "none" for o in r["outcomes"])  # fmt: skip
+    control = next((r for r in rows if r["fault"] == "none"), None)
+    lines = [
+        f"Written by `{result['command']}` on {result.get('date', 'an earlier day')}.",
+        "",
+        table(result["rows"]),
+        "",
+        f"{went_on} of {injected} injections continued or resumed; "
+        f"{sum(r['episodes_lost'] for r in rows if r['fault'] != 'none')} episodes lost, "
+        f"{sum(r['episodes_uncounted'] for r in rows)} uncounted and "
+        f"{sum(r['episodes_double_counted'] for r in rows)} double-counted over all rows"
+        + (f" (the control row alone: {control['episodes_lost']} lost)" if control else "")
+        + f"; {sum(r['elites_lost'] for r in rows)} elites lost; "
+        f"{sum(len(r['processes_left']) for r in rows)} processes left behind.",
+    ]
+    text = DOCS.read_text()
+    start, end = text.index(MARK[0]) + len(MARK[0]), text.index(MARK[1])
+    DOCS.write_text(text[:start] + "\n" + "\n".join(lines) + "\n" + text[end:])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--faults", default=",".join(FAULTS))
@@ -438,7 +469,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=RESULTS / "faults.json")
     args = ap.parse_args()
     if args.table:
-        print(table(json.loads(args.out.read_text())["rows"]))
+        result = json.loads(args.out.read_text())
+        print(table(result["rows"]))
+        if args.out == RESULTS / "faults.json":
+            write_docs(result)
         return
     faults = args.faults.split(",")
     unknown = set(faults) - set(FAULTS)
@@ -458,10 +492,14 @@ def main() -> None:
             print(json.dumps(row), flush=True)
             previous = json.loads(out.read_text())["rows"] if out.exists() else []
             merged = {r["fault"]: r for r in previous} | {r["fault"]: r for r in rows}
-            out.write_text(json.dumps({
+            result = {
                 "command": "python benchmarks/faults.py " + " ".join(sys.argv[1:]),
+                "date": time.strftime("%Y-%m-%d"),
                 "rows": [merged[f] for f in FAULTS if f in merged],
-            }, indent=1))  # fmt: skip
+            }
+            out.write_text(json.dumps(result, indent=1))
+            if out == RESULTS / "faults.json":
+                write_docs(result)
     finally:
         suite.close()
     print(f"wrote {out}; logs in {work}")
