@@ -26,9 +26,9 @@ still alive 30 s later; Ray's processes included).
 
     python benchmarks/faults.py [--faults actor,sampler,...] [--times 3] [--seed 0]
 
-Writes benchmarks/results/faults.json and its table into docs/security.md. The job is an [L21] skill run on the planar walker
-(configs/walker_jump.yaml, 2 actors x 4 envs, 1,024 steps per iteration, so that there are
-elites to lose), fragment timeout 10 s.
+Writes benchmarks/results/faults.json and its table into docs/security.md. The job is an [L21]
+skill run on the planar walker (configs/walker_jump.yaml, 2 actors x 4 envs, 1,024 steps per
+iteration, so that there are elites to lose), fragment timeout 10 s.
 """
 
 from __future__ import annotations
@@ -67,6 +67,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 FAULTS = ("none", "actor", "sampler", "redis", "api", "learner", "actor_stop", "disk_full",
           "corrupt")  # fmt: skip
+VERSION = 2  # of what a row checks: rows of another version are not merged
 DAMAGE = ("garbage", "nan", "bits")  # how `corrupt` damages latest.pt, by turns
 RECOVERY_LIMIT = 240.0  # seconds after which an injection counts as not recovered
 CONFIG = {
@@ -490,9 +491,12 @@ def main() -> None:
                 row = {"fault": fault, "error": f"{type(e).__name__}: {e}"[:500]}
             rows.append(row)
             print(json.dumps(row), flush=True)
-            previous = json.loads(out.read_text())["rows"] if out.exists() else []
+            before = json.loads(out.read_text()) if out.exists() else {}
+            # rows of an earlier version of this script checked less: not merged
+            previous = before.get("rows", []) if before.get("version") == VERSION else []
             merged = {r["fault"]: r for r in previous} | {r["fault"]: r for r in rows}
             result = {
+                "version": VERSION,
                 "command": "python benchmarks/faults.py " + " ".join(sys.argv[1:]),
                 "date": time.strftime("%Y-%m-%d"),
                 "rows": [merged[f] for f in FAULTS if f in merged],
