@@ -4,6 +4,7 @@ learner that stopped moving (hung inside an iteration) fail it."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import subprocess
@@ -22,6 +23,24 @@ def _health(run_dir, max_age=600):
     )  # fmt: skip
 
 
+@contextlib.contextmanager
+def _holding(lock):
+    """Another process holding `lock` (flock) as a learner's launcher does, until the block
+    ends."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
+         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(600)",
+         str(lock)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        yield
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_health_fails_unless_a_learner_holds_the_run_and_moves(tmp_path):
     run = tmp_path / "run"
     res = _health(run)
@@ -30,14 +49,7 @@ def test_health_fails_unless_a_learner_holds_the_run_and_moves(tmp_path):
     (run / LOCK_FILE).touch()
     res = _health(run)
     assert res.returncode == 1 and "its lock is free" in res.stdout
-    holder = subprocess.Popen(  # a learner: holds the lock as the launcher does
-        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
-         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(600)",
-         str(run / LOCK_FILE)],
-        stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        assert holder.stdout.readline().strip() == "held"
+    with _holding(run / LOCK_FILE):  # a learner: holds the lock as the launcher does
         assert "no liveness file" in _health(run).stdout
         beat(run)
         res = _health(run)
@@ -47,9 +59,6 @@ def test_health_fails_unless_a_learner_holds_the_run_and_moves(tmp_path):
         os.utime(run / HEARTBEAT, (stale, stale))  # file neither rewritten nor touched since
         res = _health(run, max_age=600)
         assert res.returncode == 1 and re.search("has not moved for 9[0-9][0-9] s", res.stdout)
-    finally:
-        holder.kill()
-        holder.wait()
     wait_until(lambda: _health(run).returncode == 1, 30, "the lock to be free again")
 
 
@@ -63,14 +72,7 @@ def test_the_compose_healthcheck_runs_this_check(tmp_path):
     run.mkdir()
     (run / LOCK_FILE).touch()
     assert compose_learner_health(run, 600).returncode == 1
-    holder = subprocess.Popen(
-        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
-         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(600)",
-         str(run / LOCK_FILE)],
-        stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        assert holder.stdout.readline().strip() == "held"
+    with _holding(run / LOCK_FILE):
         beat(run)
         res = compose_learner_health(run, 600)
         assert res.returncode == 0, res.stdout + res.stderr
@@ -79,6 +81,3 @@ def test_the_compose_healthcheck_runs_this_check(tmp_path):
         os.utime(run / HEARTBEAT, (stale, stale))
         res = compose_learner_health(run, 600)
         assert res.returncode == 1 and re.search("has not moved for 9[0-9][0-9] s", res.stdout)
-    finally:
-        holder.kill()
-        holder.wait()
