@@ -167,6 +167,11 @@ class SkillConfig(Section):
     w_tracking_continuous: float = Field(0.9, ge=0)
     w_task_continuous: float = Field(0.1, ge=0)
     tau_scale: PositiveFloat = Field(1.0, description="τ per unit action: Δφ in [e^-s, e^s]")
+    time_warp: bool = Field(
+        True, description="false: no time warp ([L21] §7.2's A2 and A1): the policy's τ is "
+        "ignored and the reference advances in real time (Δφ = 1), every motion's τ̂ taken as "
+        "0, so r_time pays in full and traces carry τ = 0; true: Δφ = exp(τ) (§4.1, A3)",
+    )  # fmt: skip
     trace_bins: int = Field(16, ge=2, description="reference-time bins of a motion trace")
     hold_seconds: float = Field(
         0.0, ge=0, description="after the clip's end the episode goes on this long with the "

@@ -396,3 +396,25 @@ def test_a_training_time_limit_truncates_a_skill_and_its_stand():
     assert info["skill"].completed is False
     env.set_time_limit(None)
     assert len(_run(env, lambda i: zero)) > 9  # the env's own end again
+
+
+def test_without_time_warp_the_reference_runs_in_real_time_whatever_tau_asks():
+    """[L21] §7.2's A2: `time_warp: false` ignores the policy's τ and every motion's τ̂, so φ
+    advances one control step per step, r_time pays 1 and the trace records τ = 0; with the
+    warp on, the same actions advance φ by exp(τ) per step."""
+    skill = {"time_warp": False}
+    plain = SkillEnv("walker", TASK, EnvConfig(clip="planar_jump", skill=skill))
+    warped = SkillEnv("walker", TASK, EnvConfig(clip="planar_jump"))
+    trace = np.zeros(plain.trace_shape)
+    trace[:, -1] = 0.5  # a motion that asks for e^0.5 control steps per step
+    a = np.zeros(plain.nj + 1)
+    a[plain.nj] = 0.4 / plain.skill.tau_scale
+    for env in (plain, warped):
+        env.reset(seed=0, options={"motion": trace})
+        for _ in range(5):
+            _, _, te, _, _ = env.step(a)
+            assert not te
+    assert plain._phi == pytest.approx(5.0)
+    assert warped._phi == pytest.approx(5 * np.exp(0.4))
+    assert plain._tracking(plain._phi, 0.0)[3] == pytest.approx(1.0)  # r_time: τ = τ̂ = 0
+    assert np.all(np.asarray(plain._rec["d"])[:, -1] == 0.0)

@@ -183,7 +183,10 @@ class SkillEnv(EnvCore):
         """Tabulate m_a on the reference grid: pose, end-effectors relative to the COM, COM, τ̂."""
         if trace is None:
             trace = np.zeros(self.trace_shape)
-        ma = self._motion.tables(np.asarray(trace, np.float64), self._bins)
+        trace = np.array(trace, np.float64)
+        if not self.skill.time_warp:  # A2: every motion in real time
+            trace[:, -1] = 0.0
+        ma = self._motion.tables(trace, self._bins)
         self._qa, self._bodies_a, self._eea, self._coma = ma.q, ma.bodies, ma.ee, ma.com
         self._tau_hat = ma.tau
 
@@ -240,7 +243,7 @@ class SkillEnv(EnvCore):
         m, d, c = self.model, self.data, self.character
         action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
         d_joints = action[: self.nj] * self.config.action_scale
-        tau = float(action[self.nj]) * self.skill.tau_scale
+        tau = float(action[self.nj]) * self.skill.tau_scale if self.skill.time_warp else 0.0
         dphi = float(np.exp(tau))
         phi_next = self._phi + dphi
         # PD target m0(φ') ⊕ d_t (§4.1); the servo clamps it to the joint's control range
