@@ -410,6 +410,11 @@ class SkillCurriculumConfig(Section):
     sampling: Literal["curriculum", "uniform"] = Field(
         "curriculum", description="uniform: random task parameters (the baseline of [L21] §7.3)"
     )
+    motion_parameterization: bool = Field(
+        True, description="false: m_a = m0 for every task ([L21] §7.2's A1, DeepMimic's "
+        "baseline: the policy sees a and imitates the clip itself; no kNN proxy, no P_θ fits); "
+        "elites are still kept, so ER is measured as for the others",
+    )  # fmt: skip
     reference: dict[str, float] = Field(
         default_factory=dict,
         description="a of the reference motion m0 (default: gravity 1, body scales 1, the "

@@ -84,6 +84,19 @@ def test_motions_follow_the_bootstrap_stage():
     assert c.summary().motion_version == 1 and c.summary().stage == "mixed"
 
 
+def test_without_motion_parameterization_every_task_imitates_m0():
+    """[L21] §7.2's A1: past the base stage the tasks spread over A while m_a stays m0; the
+    elites (and so ER) are kept as with the parameterization."""
+    c = make(batch_size=4, episodes_per_param=1, motion_parameterization=False)
+    c.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0)])
+    c.ingest([episode(1, (0.8, 0.5), 0.9, trace_value=3.0)])
+    c.update_motion(None, 0, None, "proxy")
+    deal = c.next_deal(4)
+    assert deal.motions is None and deal.region != "reference"
+    assert c.motions_for(SPACE.sample(np.random.default_rng(0), 5)) is None
+    assert len(c.elites) == 2 and c.elite_data()[1].shape == (2, *SHAPE)
+
+
 def test_batches_measure_exploration_rates_and_switch_phases():
     c = make(batch_size=5, episodes_per_param=2, probe_every=2)
     # a populated centre: A_h around (0.5, 0.5), A_s on a ring around it

@@ -190,8 +190,8 @@ class SkillCurriculum(AdaptiveCurriculum):
 
     def motions_for(self, tasks: np.ndarray) -> np.ndarray | None:
         """m_a for each task: None in the base stage (m0); else the kNN proxy (Eq. 14), or in
-        the mixed stage P_θ(a) for a random half."""
-        if self.stage == "base" or len(self.elites) == 0:
+        the mixed stage P_θ(a) for a random half; m0 always without motion parameterization."""
+        if self.stage == "base" or len(self.elites) == 0 or not self.sc.motion_parameterization:
             return None
         sc = self.sc
         out = np.stack(

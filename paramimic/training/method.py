@@ -184,7 +184,7 @@ class L21(Method):
         net, boot = trainer.parts["motion_net"], trainer.parts["bootstrap"]
         curriculum: MotionCurriculum = trainer.curriculum
         fitted = False
-        if it % sc.p_every == 0:
+        if sc.motion_parameterization and it % sc.p_every == 0:
             params, traces = curriculum.elite_data()
             if len(params) >= 2:
                 net.fit(params, traces, sc.p_steps)
