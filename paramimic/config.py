@@ -497,6 +497,11 @@ class CurriculumConfig(Section):
         ge=0,
         description="uniformity k of exp(-k(V̄-μ)/μ) ([WL19] Eq. 10; [L21] Eq. 17 in refinement)",
     )
+    k_ramp_iterations: int | None = Field(
+        None, ge=1, description="k rises linearly from 0 to `k` over this many policy updates "
+        "([WL19] §6: 'gradually increasing the degree of uniformity k'); a k set through the "
+        "API ends the ramp; None: `k` from the first update",
+    )  # fmt: skip
     n_mcmc: int = Field(1000, ge=1, description="N_MCMC, samples per buffer refill")
     p_mcmc: int = Field(20, ge=1, description="P_MCMC, iterations between refills")
     chains: int = Field(16, ge=1, description="Metropolis-Hastings chains")
@@ -512,6 +517,12 @@ class CurriculumConfig(Section):
         None, description="grow the task range from its centre as it is mastered (none: all of it)"
     )
     skill: SkillCurriculumConfig = SkillCurriculumConfig()
+
+    def k_at(self, iteration: int) -> float:
+        """k at a policy update: `k`, or on its linear ramp from 0 (`k_ramp_iterations`)."""
+        if self.k_ramp_iterations is None:
+            return self.k
+        return self.k * min(max(iteration, 0) / self.k_ramp_iterations, 1.0)
 
 
 class ActorsConfig(Section):

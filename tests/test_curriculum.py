@@ -65,6 +65,28 @@ def test_k_zero_is_uniform_and_negative_k_is_refused():
         c.set_k(-1)
 
 
+def test_a_k_ramp_rises_from_0_to_k_until_k_is_set_by_hand_and_survives_a_restart():
+    """[WL19] §6's remedy: k grows linearly from 0 over `k_ramp_iterations` policy updates."""
+    cfg = ExperimentConfig.model_validate(
+        {"character": "hopper", "task": TWO,
+         "curriculum": {"n_mcmc": 40, "k": 10.0, "k_ramp_iterations": 20}}
+    )  # fmt: skip
+    c = AdaptiveCurriculum.from_config(cfg)
+    assert c.sampler.k == 0.0 and c.mode == "uniform"
+    c.update_marginal(_layers(3), mu=3.0, iteration=5, refill=False)
+    assert c.sampler.k == pytest.approx(2.5)
+    c.update_marginal(_layers(3), mu=3.0, iteration=40, refill=False)
+    assert c.sampler.k == pytest.approx(10.0)
+    c.update_marginal(_layers(3), mu=3.0, iteration=10, refill=False)
+    b = AdaptiveCurriculum.from_config(cfg)
+    b.from_state(c.to_state())
+    assert b.sampler.k == pytest.approx(5.0) and b.k_ramp
+    b.set_k(3.0)  # by hand (the API): the ramp ends
+    b.update_marginal(_layers(3), mu=3.0, iteration=30, refill=False)
+    assert b.sampler.k == 3.0
+    assert _curriculum(TWO).sampler.k == 5.0  # no ramp: k from the start
+
+
 def _widening(**widen) -> AdaptiveCurriculum:
     cfg = ExperimentConfig.model_validate(
         {

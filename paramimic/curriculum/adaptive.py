@@ -46,8 +46,9 @@ class AdaptiveCurriculum:
         self.space = space
         self.config = config
         self.sampler = AdaptiveSampler(
-            space, config.k, config.n_mcmc, config.chains, config.burn_in, seed=seed
+            space, config.k_at(0), config.n_mcmc, config.chains, config.burn_in, seed=seed
         )
+        self.k_ramp = config.k_ramp_iterations is not None  # k follows config.k_at
         self.display_dims = tuple(display_dims)[:2]
         self.layers: Layers | None = None  # the latest V̄ from the learner
         self.mu: float | None = None
@@ -74,6 +75,8 @@ class AdaptiveCurriculum:
         self.layers = float32_layers(layers)
         self.mu = float(mu)
         self.marginal_iteration = int(iteration)
+        if self.k_ramp:
+            self.sampler.k = self.config.k_at(self.marginal_iteration)
         if refill:
             v_bar = marginal_function(self.layers, self.space)
             self.sampler.refill(lambda a: v_bar(self.pull(a)), self.mu)
@@ -151,6 +154,7 @@ class AdaptiveCurriculum:
         if not k >= 0:
             raise ValueError(f"k must be >= 0, got {k}")
         self.sampler.k = float(k)
+        self.k_ramp = False  # a k set by hand ends the ramp
 
     # --- what the sampler persists, besides `to_state` --------------------------------------
 
@@ -248,6 +252,7 @@ class AdaptiveCurriculum:
                 "stats": dict(self.stats),
                 "width": self.width,
                 "window": list(self.window),
+                "k_ramp": self.k_ramp,
             }
         if "marginal" in parts:
             state["marginal"] = (
@@ -265,6 +270,7 @@ class AdaptiveCurriculum:
         self.stats = dict.fromkeys(STAT_FIELDS, 0) | stats
         self.width = float(core.pop("width", 1.0 if self.config.widen is None else self.width))
         self.window = list(core.pop("window", [0, 0]))
+        self.k_ramp = bool(core.pop("k_ramp", self.k_ramp))  # absent in older states
         self.sampler.from_state(core | {"buffer": state["buffer"]})
         marginal = state["marginal"]
         self.layers = None if marginal is None else float32_layers(marginal)
