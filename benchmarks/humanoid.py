@@ -76,6 +76,7 @@ SKILL_TARGETS = {
     "humanoid_backflip": ("rotation", 0.80, None, 24_000_000),
     "humanoid_cartwheel": ("rotation", 0.80, None, 17_000_000),
 }
+FIRST_SCREENS = "2026-12-02"  # the session of the screens written before they carried theirs
 PAUSE = 600.0  # s: a gap between iterations longer than this is a stopped-and-resumed run
 
 
@@ -247,12 +248,14 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
     finally:
         ray.shutdown()
     report.pop("grid", None)
+    session = time.strftime("%Y-%m-%d")  # screens compare only within one session
     out = {"config": config, "set": sets, "label": label, "seed": seed, "budget_s": budget,
-           "train_seconds": seconds, "env_steps": steps, "steps_per_s": steps / seconds,
+           "session": session, "train_seconds": seconds, "env_steps": steps,
+           "steps_per_s": steps / seconds,
            "report": report}  # fmt: skip
     tag = "_".join(x.replace("ppo.", "").replace("env.", "") for x in sets) or "shipped"
     tag = "".join(c if c.isalnum() or c in "._=-" else "" for c in tag)
-    path = SCREENS / f"{Path(config).stem}_{tag}_s{seed}.json"
+    path = SCREENS / f"{Path(config).stem}_{tag}_s{seed}_{budget:.0f}s_{session}.json"
     path.parent.mkdir(exist_ok=True)
     path.write_text(json.dumps(out, indent=2))
     print(f"{label} seed {seed}: {steps:,} steps in {seconds:.0f} s; up "
@@ -423,14 +426,18 @@ def _screens_table(screens: list[dict]) -> str:
     compare only with screens of the same session and budget)."""
     if not screens:
         return "No screen has been run yet."
-    header = ["config", "variant", "seed", "budget", "env steps", "steps/s", "up (s of 30)",
-              "falls", "body error (m)"]  # fmt: skip
+    header = ["session", "config", "variant", "seed", "budget", "env steps", "steps/s",
+              "up (s of 30)", "falls", "body error (m)"]  # fmt: skip
+    for r in screens:
+        r.setdefault("session", FIRST_SCREENS)
     rows = [
-        [Path(r["config"]).stem, r["label"], r["seed"], f"{r['budget_s'] / 60:.0f} min",
+        [r["session"], Path(r["config"]).stem, r["label"], r["seed"],
+         f"{r['budget_s'] / 60:.0f} min",
          f"{r['env_steps'] / 1e6:.2f}M", f"{r['steps_per_s']:,.0f}",
          f"{r['mean_length_seconds']:.1f}", f"{r['fall_percent']:.0f} %",
          f"{r['mean_body_error']:.3f}"]
-        for r in sorted(screens, key=lambda r: (r["config"], r["budget_s"], r["label"], r["seed"]))
+        for r in sorted(screens, key=lambda r: (r["session"], r["config"], r["budget_s"],
+                                                r["label"], r["seed"]))
     ]  # fmt: skip
     return _table(header, rows)
 

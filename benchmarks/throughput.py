@@ -37,6 +37,7 @@ import ray
 
 from paramimic.config import ExperimentConfig, load_config
 from paramimic.envs import env_for
+from paramimic.rl.ppo import update_dtype
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
 
@@ -163,6 +164,37 @@ def rllib_steps_per_s(config: str, python: Path, iterations: int) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def peer_rows(path: str, url: str, iterations: int) -> dict:
+    """(e) for one config in both modes beside (a) for its body at 600 Hz; where the config's
+    update runs in bfloat16, its default mode again with a float32 update, to show what the
+    number format is worth."""
+    pc = load_config(ROOT / path, {"actors.num_actors": 2})
+    default = pc.actors.mode
+    at600 = load_config(ROOT / path, {"env.physics_hz": 600, "env.frame_skip": None})
+    rows: dict = {"raw_mj_step_600hz": {"steps_per_s": raw_steps_per_s(at600)}}
+    for mode in ("sync", "pipelined"):
+        rows[f"ours_{mode}"] = training_steps_per_s(pc, url, mode, iterations, Path(path).stem)
+    rows["update_dtype"] = str(update_dtype(pc.ppo.update_precision)).removeprefix("torch.")
+    if rows["update_dtype"] != "float32":
+        f32 = load_config(ROOT / path, {"actors.num_actors": 2, "ppo.update_precision": "float32"})
+        rows[f"ours_{default}_float32_update"] = training_steps_per_s(
+            f32, url, default, iterations, Path(path).stem
+        )
+    return rows | {"default_mode": default, "measured": time.strftime("%Y-%m-%d %H:%M")}
+
+
+def peer_ratios(peer: dict, rllib: dict) -> None:
+    """RLlib's arm and the targets' ratios, in place."""
+    peer["rllib"] = rllib
+    ours = peer[f"ours_{peer['default_mode']}"]["steps_per_s"]
+    if "steps_per_s" in rllib:
+        peer["default_over_rllib (target >= 1.5)"] = ours / rllib["steps_per_s"]
+        peer["pipelined_over_rllib"] = peer["ours_pipelined"]["steps_per_s"] / rllib["steps_per_s"]
+    peer["default_over_raw_600hz (humanoid target >= 1.35)"] = (
+        ours / peer["raw_mj_step_600hz"]["steps_per_s"]
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--config", default="configs/walker_base.yaml")
@@ -173,12 +205,19 @@ def main() -> None:
         "--peer-configs",
         default="configs/walker_base.yaml,configs/walker_legs.yaml,configs/humanoid_walk.yaml",
     )
+    ap.add_argument(
+        "--peers-only",
+        action="store_true",
+        help="measure only the --peer-configs rows and merge them into --out's JSON",
+    )
     ap.add_argument("--rllib-python", type=Path, default=ROOT / ".venv-rllib/bin/python")
     ap.add_argument("--rllib-iterations", type=int, default=4)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/throughput.json")
     args = ap.parse_args()
     cfg = load_config(ROOT / args.config, {"actors.num_actors": 2})
-    rows: dict[str, dict] = {"a_raw_mj_step": {"steps_per_s": raw_steps_per_s(cfg)}}
+    rows: dict[str, dict] = {}
+    if not args.peers_only:
+        rows["a_raw_mj_step"] = {"steps_per_s": raw_steps_per_s(cfg)}
     ray.init(
         address="local",  # a cluster of its own, never the one Ray's temp dir names
         num_cpus=os.cpu_count(),
@@ -189,40 +228,28 @@ def main() -> None:
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as redis_server:
             url = redis_server.url
-            rows["b_1_actor_no_policy"] = actor_steps_per_s(cfg, url, 1, False, args.rounds)
-            rows["c_1_actor_policy"] = actor_steps_per_s(cfg, url, 1, True, args.rounds)
-            rows["d_2_actors_policy"] = actor_steps_per_s(cfg, url, 2, True, args.rounds)
-            for mode in ("sync", "pipelined"):
-                rows[f"e_training_{mode}"] = training_steps_per_s(cfg, url, mode, args.iterations)
-            peers = {}
-            for path in args.peer_configs.split(","):
-                pc = load_config(ROOT / path, {"actors.num_actors": 2})
-                default = pc.actors.mode
-                at600 = load_config(ROOT / path, {"env.physics_hz": 600, "env.frame_skip": None})
-                peers[path] = (
-                    {"raw_mj_step_600hz": {"steps_per_s": raw_steps_per_s(at600)}}
-                    | {
-                        f"ours_{mode}": training_steps_per_s(
-                            pc, url, mode, args.iterations, Path(path).stem
-                        )
-                        for mode in ("sync", "pipelined")
-                    }
-                    | {"default_mode": default}
-                )
+            if not args.peers_only:
+                rows["b_1_actor_no_policy"] = actor_steps_per_s(cfg, url, 1, False, args.rounds)
+                rows["c_1_actor_policy"] = actor_steps_per_s(cfg, url, 1, True, args.rounds)
+                rows["d_2_actors_policy"] = actor_steps_per_s(cfg, url, 2, True, args.rounds)
+                for mode in ("sync", "pipelined"):
+                    rows[f"e_training_{mode}"] = training_steps_per_s(
+                        cfg, url, mode, args.iterations
+                    )
+            peers = {
+                path: peer_rows(path, url, args.iterations) for path in args.peer_configs.split(",")
+            }
     finally:
         ray.shutdown()
     for path, peer in peers.items():  # our Ray is down: RLlib starts its own
-        peer["rllib"] = rllib_steps_per_s(path, args.rllib_python, args.rllib_iterations)
-        if "steps_per_s" in peer["rllib"]:
-            r = peer["rllib"]["steps_per_s"]
-            peer["default_over_rllib (target >= 1.5)"] = (
-                peer[f"ours_{peer['default_mode']}"]["steps_per_s"] / r
-            )
-            peer["pipelined_over_rllib"] = peer["ours_pipelined"]["steps_per_s"] / r
-        peer["default_over_raw_600hz (humanoid target >= 1.35)"] = (
-            peer[f"ours_{peer['default_mode']}"]["steps_per_s"]
-            / peer["raw_mj_step_600hz"]["steps_per_s"]
-        )
+        peer_ratios(peer, rllib_steps_per_s(path, args.rllib_python, args.rllib_iterations))
+    if args.peers_only:
+        result = json.loads(args.out.read_text()) if args.out.exists() else {"peers": {}}
+        result["peers"] |= peers
+        args.out.write_text(json.dumps(result, indent=2))
+        print_peers(peers)
+        print(f"merged {len(peers)} peer row(s) into {args.out}")
+        return
     rows["learner_peak_rss_mb"] = {
         "value": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     }
@@ -263,11 +290,15 @@ def main() -> None:
             print(f"{name:30s} {r}")
     for name, v in ratios.items():
         print(f"{name:45s} {v:8.2f}")
+    print_peers(peers)
+    print(f"wrote {args.out}")
+
+
+def print_peers(peers: dict) -> None:
     for path, peer in peers.items():
         print(path, {k: round(v["steps_per_s"]) for k, v in peer.items()
                      if isinstance(v, dict) and "steps_per_s" in v})  # fmt: skip
         print(path, {k: round(v, 2) for k, v in peer.items() if isinstance(v, float)})
-    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

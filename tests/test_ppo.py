@@ -59,7 +59,8 @@ def _learner(**ppo):
     from paramimic.config import PPOConfig
     from paramimic.rl.ppo import PPOLearner
 
-    cfg = PPOConfig(num_steps=256, minibatch_size=64, num_epochs=2, hidden_sizes=(16,), **ppo)
+    base = {"num_steps": 256, "minibatch_size": 64, "num_epochs": 2, "hidden_sizes": (16,)}
+    cfg = PPOConfig(**(base | ppo))
     return PPOLearner(4, 2, cfg, seed=0)
 
 
@@ -106,3 +107,28 @@ def test_an_input_that_hardly_varied_is_not_blown_up_with_the_std_floored():
     assert normalized[0.0][0] > 6.0  # 5 mm is ~7 sigma of the experience
     assert normalized[0.02][0] == pytest.approx(0.25, abs=0.03)  # 5 mm / 2 cm
     assert normalized[0.0][1] == pytest.approx(normalized[0.02][1])  # a varied input unchanged
+
+
+def test_a_bfloat16_update_multiplies_in_bfloat16_and_moves_the_policy_as_float32_does():
+    from paramimic.rl.ppo import native_bf16, update_dtype
+
+    assert update_dtype("float32") == torch.float32
+    assert update_dtype("bfloat16") == torch.bfloat16
+    assert update_dtype("auto") == (torch.bfloat16 if native_bf16() else torch.float32)
+    moved = {}
+    for precision in ("float32", "bfloat16"):
+        learner = _learner(update_precision=precision, hidden_sizes=(64, 64))
+        x = torch.randn(8, 4)
+        with learner._precision():
+            mean, value = learner.policy(x)
+        assert mean.dtype == value.dtype == getattr(torch, precision)
+        before = torch.cat([p.detach().flatten().clone() for p in learner.policy.pi.parameters()])
+        metrics = learner.update(_batch(np.random.default_rng(2)))
+        after = torch.cat([p.detach().flatten() for p in learner.policy.pi.parameters()])
+        assert metrics["skipped_steps"] == 0 and metrics["update_steps"] == 8
+        assert next(learner.policy.parameters()).dtype == torch.float32  # weights stay float32
+        moved[precision] = after - before
+    cos = torch.nn.functional.cosine_similarity(moved["float32"], moved["bfloat16"], dim=0)
+    assert cos > 0.95
+    norms = moved["bfloat16"].norm() / moved["float32"].norm()
+    assert norms == pytest.approx(1.0, abs=0.1)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import functools
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -63,6 +66,26 @@ class Batch:
 
 
 LR_MIN, LR_MAX = 1e-5, 1e-2  # bounds of the adaptive policy learning rate
+BF16_FLAGS = ("amx_bf16", "avx512_bf16")  # CPU flags of native bfloat16 matrix products
+
+
+@functools.cache
+def native_bf16() -> bool:
+    """Whether this CPU multiplies bfloat16 matrices natively (Linux's /proc/cpuinfo flags)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    flags = next((line.split(":", 1)[1].split() for line in text.splitlines()
+                  if line.startswith("flags")), [])  # fmt: skip
+    return any(f in flags for f in BF16_FLAGS) and torch.ops.mkldnn._is_mkldnn_bf16_supported()
+
+
+def update_dtype(precision: str) -> torch.dtype:
+    """The dtype of the update's matrix products for `PPOConfig.update_precision`."""
+    if precision == "auto":
+        precision = "bfloat16" if native_bf16() else "float32"
+    return torch.bfloat16 if precision == "bfloat16" else torch.float32
 
 
 class PPOLearner:
@@ -81,6 +104,13 @@ class PPOLearner:
         self.normalizer = RunningMeanStd(obs_dim)
         self.rng = np.random.default_rng(seed)
         self.version = 0  # policy version, +1 per update
+        self.dtype = update_dtype(cfg.update_precision)
+
+    def _precision(self) -> contextlib.AbstractContextManager:
+        """bfloat16 matrix products under autocast, or nothing to change."""
+        if self.dtype == torch.float32:
+            return contextlib.nullcontext()
+        return torch.autocast("cpu", dtype=self.dtype)
 
     def weights(self) -> dict[str, np.ndarray]:
         """Everything an actor needs to act, as numpy (actors do not load torch): network
@@ -137,7 +167,9 @@ class PPOLearner:
                 idx = torch.from_numpy(order[start : start + mb])
                 a = adv[idx]
                 a = (a - a.mean()) / (a.std() + 1e-8)  # advantage normalization per minibatch
-                mean, value = self.policy(obs[idx])
+                with self._precision():
+                    mean, value = self.policy(obs[idx])
+                mean, value = mean.float(), value.float()  # log-probs and losses in float32
                 new_logp = self.policy.log_prob(mean, actions[idx])
                 loss, stats = ppo_loss(
                     new_logp,
