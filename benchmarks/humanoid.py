@@ -327,6 +327,7 @@ def table() -> dict:
     screens = [json.loads(p.read_text()) for p in sorted(SCREENS.glob("*.json"))]
     out["screens"] = [
         {k: r[k] for k in ("config", "label", "seed", "budget_s", "env_steps", "steps_per_s")}
+        | {"session": r.get("session", FIRST_SCREENS)}
         | {k: r["report"][k] for k in SCREEN_KEYS}
         for r in screens
     ]
@@ -428,8 +429,6 @@ def _screens_table(screens: list[dict]) -> str:
         return "No screen has been run yet."
     header = ["session", "config", "variant", "seed", "budget", "env steps", "steps/s",
               "up (s of 30)", "falls", "body error (m)"]  # fmt: skip
-    for r in screens:
-        r.setdefault("session", FIRST_SCREENS)
     rows = [
         [r["session"], Path(r["config"]).stem, r["label"], r["seed"],
          f"{r['budget_s'] / 60:.0f} min",
@@ -488,6 +487,85 @@ def _write_docs(rows: dict[str, list]) -> None:
     _write_section(MARK, _table(header, lines) + "\n\n" + "\n".join(verdicts))
 
 
+def precision(controller: str, steps: int, repeats: int) -> dict:
+    """What a bfloat16 update changes, on a shipped controller's own experience (`steps` control
+    steps of its config's env, the policy's std as noise): log π/π_old at an unchanged policy
+    (the update's first minibatch ratio, float32 actors against a bfloat16 learner), the value's
+    error, and the PPO update's samples/s in float32 and bfloat16 on that batch, alternating
+    `repeats` times in one process on one thread (alone on the machine)."""
+    import time
+
+    import torch
+
+    from paramimic.envs import env_for
+    from paramimic.rl.ppo import Batch, PPOLearner, native_bf16
+    from paramimic.training.checkpoint import load_policy
+
+    torch.set_num_threads(1)
+    state, cfg, policy = load_policy(controller)
+    env = env_for(cfg)
+    rng = np.random.default_rng(0)
+    obs, _ = env.reset(seed=0)
+    rows = []
+    std = float(np.exp(cfg.ppo.init_log_std))
+    for _ in range(steps):
+        with torch.no_grad():
+            mean, value = policy(torch.as_tensor(obs[None], dtype=torch.float32))
+        action = mean.numpy()[0] + std * rng.standard_normal(mean.shape[1])
+        rows.append((obs, action, float(value)))
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            obs, _ = env.reset()
+    o = np.array([r[0] for r in rows], np.float32)
+    a = np.array([r[1] for r in rows], np.float32)
+    values = np.array([r[2] for r in rows])
+    learners = {}
+    for name in ("float32", "bfloat16"):
+        ppo = cfg.ppo.model_copy(update={"update_precision": name, "num_steps": steps})
+        learner = PPOLearner(state["obs_dim"], state["act_dim"], ppo)
+        learner.policy.load_state_dict(state["learner"]["policy"])
+        learner.policy.log_std.data[:] = float(np.log(std))
+        learners[name] = learner
+    ref = learners["float32"]
+    with torch.no_grad():
+        x = torch.from_numpy(o)
+        mean32, v32 = ref.policy(x)
+        logp32 = ref.policy.log_prob(mean32, torch.from_numpy(a))
+        with learners["bfloat16"]._precision():
+            mean16, v16 = learners["bfloat16"].policy(x)
+        logp16 = ref.policy.log_prob(mean16.float(), torch.from_numpy(a))
+    log_ratio = (logp16 - logp32).numpy()
+    batch = Batch(o, a, logp32.numpy(), values, rng.standard_normal(steps), values,
+                  np.zeros((steps, 1)))  # fmt: skip
+    speed: dict[str, list[float]] = {"float32": [], "bfloat16": []}
+    for _ in range(repeats):
+        for name, learner in learners.items():
+            t = time.perf_counter()
+            learner.update(batch)
+            speed[name].append(steps / (time.perf_counter() - t))
+    out = {
+        "controller": controller,
+        "native_bf16": native_bf16(),
+        "samples": steps,
+        "network": list(cfg.ppo.hidden_sizes),
+        "epochs": cfg.ppo.num_epochs,
+        "minibatch": cfg.ppo.minibatch_size,
+        "log_ratio_std": float(log_ratio.std()),
+        "log_ratio_max_abs": float(np.abs(log_ratio).max()),
+        "ratio_outside_clip_share": float(
+            (np.abs(np.exp(log_ratio) - 1) > cfg.ppo.clip_coef).mean()
+        ),
+        "value_mean_abs_error": float((v16.float() - v32).abs().mean()),
+        "value_mean_abs": float(v32.abs().mean()),
+        "update_samples_per_s": {k: float(np.median(v)) for k, v in speed.items()},
+        "update_speedup": float(np.median(speed["bfloat16"]) / np.median(speed["float32"])),
+    }
+    path = RESULTS / "humanoid_precision.json"
+    path.write_text(json.dumps(out, indent=2))
+    print(json.dumps(out, indent=2))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -508,7 +586,14 @@ def main() -> None:
     sc.add_argument("--budget", type=float, default=1200.0, help="wall-clock seconds")
     sc.add_argument("--seed", type=int, default=0)
     sc.add_argument("--episodes", type=int, default=50)
+    pr = sub.add_parser("precision")
+    pr.add_argument("--controller", default="humanoid_walk")
+    pr.add_argument("--steps", type=int, default=8192)
+    pr.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
+    if args.cmd == "precision":
+        precision(args.controller, args.steps, args.repeats)
+        return
     if args.cmd == "skill":
         r = evaluate_skill(args.run, args.tries)
         name = f"{r['config']}_skill_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
