@@ -134,21 +134,22 @@ def compare(runs: list[dict]) -> dict:
     return out
 
 
-def plot(runs: list[dict], path: Path) -> None:
+def plot(runs: list[dict], path: Path, config: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    colors = {"curriculum": "tab:red", "uniform": "tab:blue"}
+    colors = {"curriculum": "tab:red", "uniform": "tab:blue", "exploration_only": "tab:green",
+              "mastering": "tab:purple", "alternating": "tab:orange"}  # fmt: skip
     for r in runs:
         n = [p["episodes"] for p in r["curve"]]
         er = [p["explored_ratio"] for p in r["curve"]]
         ax.plot(n, er, color=colors[r["sampling"]], label=f"{r['sampling']} (seed {r['seed']})")
     ax.set_xlabel("episodes N")
     ax.set_ylabel("explored ratio ER")
-    ax.set_title("walker_jump: curriculum vs uniform sampling ([L21] Fig. 8)")
+    ax.set_title(f"{Path(config).stem}: the curricula of [L21] §7.3 (Fig. 8)")
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -159,6 +160,12 @@ def main() -> None:
     p.add_argument("--config", default="configs/walker_jump.yaml")
     p.add_argument("--steps", type=int, default=400_000)
     p.add_argument("--seeds", default="0")
+    p.add_argument(
+        "--samplings",
+        default="curriculum,uniform",
+        help="curriculum.skill.sampling values compared: curriculum (ours), uniform (the "
+        "baseline), exploration_only, mastering, alternating ([L21] §7.3)",
+    )
     p.add_argument("--jobs", type=int, default=2, help="runs at once, one process each")
     p.add_argument("--out", default=str(RESULTS / "curriculum.json"))
     p.add_argument(
@@ -177,6 +184,7 @@ def main() -> None:
         out.write_text(json.dumps(result, indent=1))
         return
     seeds = [int(s) for s in args.seeds.split(",")]
+    samplings = args.samplings.split(",")
     kept = RESULTS / "curriculum_runs"
     kept.mkdir(parents=True, exist_ok=True)
 
@@ -192,7 +200,7 @@ def main() -> None:
             ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}",
         )
         for seed in seeds
-        for sampling in ("curriculum", "uniform")
+        for sampling in samplings
         if not kept_path(sampling, seed).exists()
     ]
     with multiprocessing.get_context("spawn").Pool(max(1, args.jobs)) as pool:
@@ -201,7 +209,7 @@ def main() -> None:
     runs = [
         json.loads(kept_path(sampling, seed).read_text())
         for seed in seeds
-        for sampling in ("curriculum", "uniform")
+        for sampling in samplings
     ]
     result = {
         "config": args.config,
@@ -214,7 +222,7 @@ def main() -> None:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
-    plot(runs, out.with_suffix(".png"))
+    plot(runs, out.with_suffix(".png"), args.config)
     print(json.dumps(result["comparison"], indent=1))
 
 

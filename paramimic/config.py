@@ -414,9 +414,34 @@ class SkillCurriculumConfig(Section):
     Distances in the task space are measured on the box normalized to [0, 1] per free dimension
     (A = diag(1/width²); the paper's A = I on its normalized parameters)."""
 
-    sampling: Literal["curriculum", "uniform"] = Field(
-        "curriculum", description="uniform: random task parameters (the baseline of [L21] §7.3)"
+    sampling: Literal["curriculum", "uniform", "exploration_only", "mastering", "alternating"] = (
+        Field(
+            "curriculum",
+            description="the curricula of [L21] §7.3: curriculum (ours, §6's phase rule), "
+            "uniform (the baseline: random task parameters), exploration_only (explore until "
+            "ER reaches `exploration_complete`, then refine), mastering (refine until the "
+            "visited region's mean V̄ reaches `mastery_threshold` of V̄(a0) or "
+            "`phase_timeout` updates pass), alternating (`phase_updates` policy updates per "
+            "phase)",
+        )
     )
+    phase_updates: int = Field(
+        20, ge=1, description="alternating: policy updates per phase ([L21] §7.3: 20)"
+    )
+    mastery_threshold: float = Field(
+        0.9,
+        gt=0,
+        description="mastering: refinement ends once the mean V̄ over the live elites is this "
+        "share of V̄ at the reference a0 (ours; [L21] §7.3 gives no number)",
+    )
+    phase_timeout: int = Field(
+        100, ge=1, description="mastering: policy updates a phase lasts at most (ours; "
+        "[L21] §7.3 gives no number)",
+    )  # fmt: skip
+    exploration_complete: float = Field(
+        1.0, gt=0, le=1, description="exploration_only: the ER that ends exploration ([L21] "
+        "§7.3: ER = 1)",
+    )  # fmt: skip
     motion_parameterization: bool = Field(
         True, description="false: m_a = m0 for every task ([L21] §7.2's A1, DeepMimic's "
         "baseline: the policy sees a and imitates the clip itself; no kNN proxy, no P_θ fits); "

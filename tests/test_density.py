@@ -66,3 +66,33 @@ def test_sample_band_draws_only_from_the_band():
     rho = kde(ring)
     assert np.all((rho >= 0.2) & (rho < 0.8))
     assert len(sample_band(SPACE, kde, rng, 5, 2.0)) == 0  # nowhere that dense
+
+
+def test_the_curricula_of_l21_section_7_3_switch_by_their_own_rules():
+    # alternating: a fixed number of policy updates per phase, whatever the rates say
+    alt = PhaseSwitch(rule="alternating", smoothing=0.0)
+    alt.observe(SURROUNDING, 0.0, 5)
+    alt.observe(VISITED, 9.0, 5)  # ours would refine here; alternating keeps its clock
+    assert [alt.tick(i, phase_updates=20) for i in (19, 20, 39, 40)] == [
+        "exploration", "refinement", "refinement", "exploration"
+    ]  # fmt: skip
+    assert alt.switches == 2 and alt.started == 40
+    # exploration-only: explore until ER = 1, then refine for good
+    exp = PhaseSwitch(rule="exploration_only", smoothing=0.0)
+    assert exp.tick(500, explored_ratio=0.99) == "exploration"
+    assert exp.tick(501, explored_ratio=1.0) == "refinement"
+    exp.observe(SURROUNDING, 5.0, 502)
+    exp.observe(VISITED, 0.0, 502)  # A_s far more fruitful: ours would explore again
+    assert exp.tick(10_000, explored_ratio=0.5) == "refinement" and exp.switches == 1
+    # mastering: exploration ends as ours does, refinement on mastery, either on its timeout
+    mas = PhaseSwitch(rule="mastering", smoothing=0.0)
+    mas.observe(SURROUNDING, 2.0, 0)
+    assert mas.observe(VISITED, 3.0, 7) == "refinement" and mas.started == 7
+    mas.observe(SURROUNDING, 9.0, 8)  # ours would explore again; mastering waits for mastery
+    assert mas.tick(8, mastered=False, timeout=100) == "refinement"
+    assert mas.tick(9, mastered=True, timeout=100) == "exploration" and mas.started == 9
+    assert mas.tick(108, timeout=100) == "exploration"
+    assert mas.tick(109, timeout=100) == "refinement"  # the timeout: 100 updates exploring
+    # ours ignores the clock
+    ours = PhaseSwitch()
+    assert ours.tick(10_000, explored_ratio=1.0, mastered=True) == "exploration"

@@ -183,3 +183,36 @@ def test_bootstrap_stages():
     twin = Bootstrap(cfg)
     twin.from_state(json.loads(json.dumps(b.to_state())))
     assert twin.to_state() == b.to_state()
+
+
+def test_the_phase_clock_starts_after_pi0_and_survives_a_state_round_trip():
+    """[L21] §7.3's alternating curriculum: `phase_updates` policy updates per phase, counted
+    from the end of the base stage (π0's updates are not a phase)."""
+    c = make(sampling="alternating", phase_updates=3)
+    layers = [[np.zeros((2, 1)), np.ones(1)]]
+    for it in range(10):  # π0: the clock does not run
+        c.update_marginal(layers, 1.0, it, refill=False)
+    assert c.summary().phase == "base" and c.phase.started == 9
+    c.update_motion(None, 0, None, "proxy")
+    phases = []
+    for it in range(10, 16):
+        c.update_marginal(layers, 1.0, it, refill=False)
+        phases.append(c.phase.phase)
+    assert phases == ["exploration"] * 2 + ["refinement"] * 3 + ["exploration"]
+    assert c.stats["phase_switches"] == 2
+    d = make(sampling="alternating", phase_updates=3)
+    d.from_state(json.loads(json.dumps(c.to_state())))
+    assert (d.phase.phase, d.phase.started, d.phase.rule) == ("exploration", 15, "alternating")
+
+
+def test_mastery_is_the_visited_skills_mean_marginal_value_against_the_reference():
+    c = make(sampling="mastering", mastery_threshold=0.9)
+    # V̄(a) = 1 − x_gravity on the scaled box (x = 2g − 1): 1 at a0 (g = 0.5), 0.4 at g = 0.8
+    c.update_marginal([[np.array([[-1.0], [0.0]]), np.ones(1)]], 1.0, 0, refill=False)
+    assert not c.mastered()  # no elites yet
+    c.ingest([episode(0, (0.8, 0.5), 0.9, trace_value=1.0)])
+    assert not c.mastered()  # 0.4 < 0.9 x 1
+    c.ingest([episode(1, (0.5, 0.2), 0.9, trace_value=1.0)])  # V̄ 1.0: mean 0.7
+    assert not c.mastered()
+    c.update_marginal([[np.array([[-0.1], [0.0]]), np.ones(1)]], 1.0, 1, refill=False)
+    assert c.mastered()  # V̄ 0.94 and 1.0: mean 0.97 >= 0.9

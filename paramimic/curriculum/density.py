@@ -78,17 +78,28 @@ def sample_band(
 
 @dataclass
 class PhaseSwitch:
-    """[L21] §6.3: exploration until the exploration rate in A_s falls below the one in A_h,
-    refinement until it rises above it again. Rates are smoothed over the occasional samples
-    taken in each region (exponential moving average with `smoothing`)."""
+    """When to explore and when to refine: the curricula of [L21] §7.3 beside ours.
+
+    - `curriculum` (ours, §6.3): exploration until the exploration rate in A_s falls below the
+      one in A_h, refinement until it rises above it again. Rates are smoothed over the
+      occasional samples taken in each region (exponential moving average with `smoothing`).
+    - `exploration_only`: exploration until ER reaches the config's `exploration_complete`,
+      then refinement for good.
+    - `mastering`: exploration ends as ours does; refinement ends once the skills of the
+      visited region are mastered (the caller's test) — each phase ends at its timeout at the
+      latest.
+    - `alternating`: a fixed number of policy updates per phase.
+    `started` is the policy update (the learner's iteration) at which the phase began."""
 
     phase: str = "exploration"
     rate_surrounding: float | None = None
     rate_visited: float | None = None
     smoothing: float = 0.5
     switches: int = 0
+    rule: str = "curriculum"
+    started: int = 0
 
-    def observe(self, region: str, rate: float) -> str:
+    def observe(self, region: str, rate: float, iteration: int = 0) -> str:
         """Record the exploration rate of a batch drawn in `region`; returns the phase."""
         if region == SURROUNDING:
             self.rate_surrounding = _ema(self.rate_surrounding, rate, self.smoothing)
@@ -99,12 +110,40 @@ class PhaseSwitch:
                 f"rates are measured in {VISITED!r} or {SURROUNDING!r}, not {region!r}"
             )
         s, h = self.rate_surrounding, self.rate_visited
-        if s is not None and h is not None:
-            if self.phase == "exploration" and s < h:
-                self.phase, self.switches = "refinement", self.switches + 1
-            elif self.phase == "refinement" and s > h:
-                self.phase, self.switches = "exploration", self.switches + 1
+        if s is None or h is None or self.rule not in ("curriculum", "mastering"):
+            return self.phase
+        explored = self.phase == "exploration" and s < h
+        refined = self.phase == "refinement" and s > h and self.rule == "curriculum"
+        if explored or refined:
+            self.switch(iteration)
         return self.phase
+
+    def tick(
+        self,
+        iteration: int,
+        explored_ratio: float | None = None,
+        mastered: bool = False,
+        phase_updates: int = 20,
+        timeout: int = 100,
+        complete: float = 1.0,
+    ) -> str:
+        """The rules on the clock, on ER and on mastery, at policy update `iteration`."""
+        age = iteration - self.started
+        if self.rule == "alternating" and age >= phase_updates:
+            self.switch(iteration)
+        elif self.rule == "exploration_only":
+            if self.phase == "exploration" and (explored_ratio or 0.0) >= complete:
+                self.switch(iteration)
+        elif self.rule == "mastering" and (
+            age >= timeout or (self.phase == "refinement" and mastered)
+        ):
+            self.switch(iteration)
+        return self.phase
+
+    def switch(self, iteration: int) -> None:
+        self.phase = "refinement" if self.phase == "exploration" else "exploration"
+        self.switches += 1
+        self.started = iteration
 
 
 def _ema(old: float | None, new: float, smoothing: float) -> float:

@@ -67,7 +67,7 @@ class SkillCurriculum(AdaptiveCurriculum):
         self.removed: set[str] = set()
         self.reference = np.asarray(reference, np.float64)
         self.trace_shape = tuple(trace_shape)
-        self.phase = PhaseSwitch()
+        self.phase = PhaseSwitch(rule=self._rule())
         self.stage = "base"
         self.motion_layers: Layers | None = None
         self.motion_version = 0
@@ -144,7 +144,7 @@ class SkillCurriculum(AdaptiveCurriculum):
     def _new_batch(self) -> None:
         sc, rng, B = self.sc, self.rng, self.sc.batch_size
         self.batch_count += 1
-        if self.stage == "base" or (sc.sampling == "curriculum" and len(self.elites) == 0):
+        if self.stage == "base" or (sc.sampling != "uniform" and len(self.elites) == 0):
             # π0 learns m0 at a0 first, whatever samples the tasks afterwards (§5.3)
             params, region = np.tile(self.reference, (B, 1)), "reference"
         elif sc.sampling == "uniform":
@@ -255,12 +255,55 @@ class SkillCurriculum(AdaptiveCurriculum):
         rate = record["improved"] / record["ingested"]
         if record["region"] in (VISITED, SURROUNDING):
             before = self.phase.phase
-            self.phase.observe(record["region"], rate)
-            if self.phase.phase != before:
-                self.stats["phase_switches"] = self.stats.get("phase_switches", 0) + 1
+            self.phase.observe(record["region"], rate, self.marginal_iteration)
+            self._count_switch(before)
         self.history.append((int(self.stats["episodes"]), self.explored_ratio()))
         del self.history[:-HISTORY]
         record["closed"] = rate
+        self._tick()
+
+    # --- the phase rules of [L21] §7.3 ---------------------------------------------------------
+
+    def _rule(self) -> str:
+        return "curriculum" if self.sc.sampling == "uniform" else self.sc.sampling
+
+    def _count_switch(self, before: str) -> None:
+        if self.phase.phase != before:
+            self.stats["phase_switches"] = self.stats.get("phase_switches", 0) + 1
+
+    def _tick(self) -> None:
+        """The rules on the clock, ER and mastery; their clock starts when π0 is done."""
+        if self.stage == "base" or self.sc.sampling == "uniform":
+            self.phase.started = max(self.marginal_iteration, 0)
+            return
+        sc, before = self.sc, self.phase.phase
+        er = self.history[-1][1] if self.history else None
+        mastered = sc.sampling == "mastering" and before == "refinement" and self.mastered()
+        self.phase.tick(
+            self.marginal_iteration,
+            er,
+            mastered,
+            sc.phase_updates,
+            sc.phase_timeout,
+            sc.exploration_complete,
+        )
+        self._count_switch(before)
+
+    def mastered(self) -> bool:
+        """The mastering curriculum's test: the mean V̄ over the live elites (the visited
+        region's skills) is at least `mastery_threshold` of V̄ at the reference a0."""
+        live = self.elites.live()
+        if self.layers is None or not len(live):
+            return False
+        v_bar = marginal_function(self.layers, self.space)
+        ref = float(v_bar(self.reference[None])[0])
+        return ref > 0 and float(v_bar(self.elites.params[live]).mean()) >= (
+            self.sc.mastery_threshold * ref
+        )
+
+    def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
+        super().update_marginal(layers, mu, iteration, refill)
+        self._tick()
 
     ENTRY_PARTS = ("traces",)  # one entry per elite: written as the elite set changes
 
@@ -402,6 +445,7 @@ class SkillCurriculum(AdaptiveCurriculum):
     def from_state(self, state: dict) -> None:
         core = dict(state["core"])
         self.phase = PhaseSwitch(**core.pop("phase"))
+        self.phase.rule = self._rule()  # the config's, also for states written before rules
         self.stage = core.pop("stage")
         b = core.pop("batch")
         self.batch = None if b is None else b | {"params": np.asarray(b["params"], np.float64)}
