@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from paramimic.recipes import PRESETS, apply
 from paramimic.task_space import TaskSpace
 
 PositiveFloat = Annotated[float, Field(gt=0)]
@@ -224,6 +225,11 @@ class EnvConfig(Section):
     )
     max_episode_seconds: PositiveFloat = Field(30.0, description="time limit ([WL19] Table 2)")
     action_scale: PositiveFloat = Field(0.5, description="rad of PD target offset per unit action")
+    pd_gain: PositiveFloat | None = Field(
+        None,
+        description="one k_p (N·m/rad) for every joint, k_d = 2√k_p ([L21] §7: k_p 600, k_d 49); "
+        "None: each joint's own gains (the character's, DeepMimic's for the humanoid)",
+    )
     imitation: bool = Field(True, description="follow the character's procedural reference motion")
     retarget: bool = Field(
         False,
@@ -378,6 +384,11 @@ class PPOConfig(Section):
     vf_coef: PositiveFloat = Field(0.5, description="value loss weight")
     max_grad_norm: PositiveFloat = Field(0.5, description="gradient clipping")
     hidden_sizes: Layers = Field((128, 128, 128), description="3 layers of 128 ([WL19] §5)")
+    value_hidden_sizes: Layers | None = Field(
+        None,
+        description="the value network's layers ([L21] §7: 2 x 512 beside a 4 x 1024 policy); "
+        "None: the policy's",
+    )
     init_log_std: float = Field(
         -1.0, ge=-20.0, le=2.0, description="initial log std of the Gaussian policy (-20 to 2)"
     )
@@ -661,6 +672,12 @@ class ExperimentConfig(Section):
         "base body, [1 - s(1 - lo), 1 + s(hi - 1)] (0.5: the x0.5 families of the study; 0: the "
         "base body alone)",
     )
+    recipe: Literal["wl19", "l21", "paramimic_walker", "paramimic_humanoid"] | None = Field(
+        None,
+        description="a preset that sets every field where a paper's settings and ours part "
+        "ways (paramimic/recipes.py; `paramimic config show` says where each value comes "
+        "from): wl19, l21, paramimic_walker, paramimic_humanoid; a field the config sets wins",
+    )
     env: EnvConfig = EnvConfig()
     ppo: PPOConfig = PPOConfig()
     curriculum: CurriculumConfig = CurriculumConfig()
@@ -863,6 +880,18 @@ class ExperimentConfig(Section):
     def resolved_run_dir(self) -> Path:
         return self.train.run_dir or Path("runs") / self.name
 
+    @model_validator(mode="before")
+    @classmethod
+    def _recipe(cls, data: Any) -> Any:
+        """The named recipe's fields beneath what the config sets (paramimic/recipes.py).
+        Defined last: pydantic runs `before` validators last-defined first, so the character's
+        defaults and the inline measures see the recipe's values."""
+        if not isinstance(data, dict) or data.get("recipe") is None:
+            return data
+        if data["recipe"] not in PRESETS:
+            return data  # the field's own error names the known recipes
+        return apply(data)
+
 
 class ConfigError(ValueError):
     """A config that cannot run; the message names the field and the reason."""
@@ -891,8 +920,8 @@ def format_validation_error(err: ValidationError) -> str:
     return "; ".join(lines)
 
 
-def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> ExperimentConfig:
-    """Load and validate a YAML experiment; raise ConfigError naming the field on any problem."""
+def raw_config(path: str | Path, overrides: dict[str, Any] | None = None) -> dict:
+    """A YAML experiment as written, with its name and the dotted `overrides` set."""
     path = Path(path)
     try:
         raw = yaml.safe_load(path.read_text()) or {}
@@ -907,6 +936,13 @@ def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> Ex
         for p in parents:
             node = node.setdefault(p, {})
         node[leaf] = value
+    return raw
+
+
+def load_config(path: str | Path, overrides: dict[str, Any] | None = None) -> ExperimentConfig:
+    """Load and validate a YAML experiment; raise ConfigError naming the field on any problem."""
+    path = Path(path)
+    raw = raw_config(path, overrides)
     try:
         return ExperimentConfig.model_validate(raw)
     except ValidationError as e:
@@ -922,6 +958,7 @@ RESUME_FIXED = (
     "shape_scale",
     "env",
     "ppo.hidden_sizes",
+    "ppo.value_hidden_sizes",
     "ppo.learn_std",
     "curriculum.marginal_hidden",
     "curriculum.skill.p_hidden",
@@ -951,3 +988,20 @@ def resume_conflicts(saved: dict, cfg: ExperimentConfig) -> list[str]:
         and any(key == f or key.startswith(f + ".") for f in RESUME_FIXED)
         and not key.startswith("env.clip_texts.")  # the same file's text, carried or not
     ]
+
+
+def field_descriptions(model: type[BaseModel] | None = None, prefix: str = "") -> dict[str, str]:
+    """Dotted field name -> its description (sections walked, optional ones too)."""
+    model = model or ExperimentConfig
+    out: dict[str, str] = {}
+    for name, info in model.model_fields.items():
+        key = f"{prefix}{name}"
+        section = next(
+            (t for t in (info.annotation, *getattr(info.annotation, "__args__", ()))
+             if isinstance(t, type) and issubclass(t, BaseModel)),
+            None,
+        )  # fmt: skip
+        if section is not None:
+            out |= field_descriptions(section, key + ".")
+        out[key] = info.description or ""
+    return out

@@ -493,6 +493,50 @@ def controllers_add(
     console.print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
 
 
+config_app = typer.Typer(no_args_is_help=True, help="Experiment configs and their recipes.")
+app.add_typer(config_app, name="config")
+
+
+@config_app.command("show")
+def config_show(
+    config: Annotated[Path, typer.Argument(help="experiment YAML")],
+    sets: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="KEY=VALUE (YAML value), e.g. --set recipe=wl19"),
+    ] = None,
+    departures: Annotated[
+        bool, typer.Option("--departures", help="only the fields a recipe or the config sets")
+    ] = False,
+) -> None:
+    """Every field of CONFIG with its value and where it comes from: the config, its recipe
+    (with the paper's section or our study), or the library default (with its description)."""
+    import yaml
+    from rich.table import Table
+
+    from paramimic.config import ExperimentConfig, field_descriptions, raw_config
+    from paramimic.recipes import flatten, sources
+
+    overrides = {}
+    for item in sets or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            _fail(f"--set {item!r}: KEY=VALUE, e.g. ppo.num_epochs=5")
+        overrides[key] = yaml.safe_load(value)
+    try:
+        raw = raw_config(config, overrides)
+        cfg = load_config(config, overrides)
+    except ConfigError as e:
+        _fail(str(e))
+    fields = flatten(cfg.model_dump(mode="json", exclude={"env": {"clip_texts"}}))
+    where = sources(raw, fields, field_descriptions(ExperimentConfig))
+    table = Table("field", "value", "source", title=f"{config} (recipe: {cfg.recipe})")
+    for key, value in fields.items():
+        if departures and where[key].startswith("default"):
+            continue
+        table.add_row(key, json.dumps(value), where[key])
+    console.print(table)
+
+
 clip_app = typer.Typer(no_args_is_help=True, help="Motion clips: built-in ones and your own.")
 app.add_typer(clip_app, name="clip")
 

@@ -9,6 +9,8 @@ observation, reward and termination.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from functools import cache, lru_cache
@@ -79,11 +81,22 @@ def _reshaper(character: str) -> Reshaper:
 
 @lru_cache(maxsize=32)
 def compiled_body(
-    character: str, shape: tuple[tuple[str, float], ...], timestep: float = TIMESTEP
+    character: str,
+    shape: tuple[tuple[str, float], ...],
+    timestep: float = TIMESTEP,
+    pd_gain: float | None = None,
 ) -> Body:
     """F(B̄, b) compiled (by editing the character's one spec) for a physics time step, cached
-    per (character, shape, time step): shared by the envs of a process."""
-    return _reshaper(character)(dict(shape), timestep)
+    per (character, shape, time step, gain): shared by the envs of a process. `pd_gain`: one
+    k_p for every servo, k_d = 2√k_p ([L21] §7: 600 and 49), on a copy of the model."""
+    body = _reshaper(character)(dict(shape), timestep)
+    if pd_gain is None:
+        return body
+    model = copy.copy(body.model)
+    model.actuator_gainprm[:, 0] = pd_gain
+    model.actuator_biasprm[:, 1] = -pd_gain
+    model.actuator_biasprm[:, 2] = -2.0 * np.sqrt(pd_gain)
+    return dataclasses.replace(body, model=model)
 
 
 class EnvCore(gym.Env, ABC):
@@ -118,7 +131,7 @@ class EnvCore(gym.Env, ABC):
         self._task = self.task_space.center.copy()
         self.frame_skip = self.config.frame_skip
         self._timestep = 1.0 / self.config.physics_hz  # the body is compiled at this rate
-        self._base = compiled_body(self.definition.name, (), self._timestep)
+        self._base = compiled_body(self.definition.name, (), self._timestep, self.config.pd_gain)
         self._base_data = mujoco.MjData(self._base.model)
         self.character: Body | None = None
         self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
@@ -171,7 +184,7 @@ class EnvCore(gym.Env, ABC):
     def body_for(self, task: np.ndarray) -> Body:
         """The compiled body of the shape part of `task`."""
         shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
-        return compiled_body(self.definition.name, shape, self._timestep)
+        return compiled_body(self.definition.name, shape, self._timestep, self.config.pd_gain)
 
     def _load(self, task: np.ndarray) -> bool:
         """Make the body of `task` current (its model and data); False if it already was."""

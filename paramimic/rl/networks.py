@@ -68,6 +68,7 @@ class ActorCritic(nn.Module):
         init_log_std: float,
         obs_clip: float = 10.0,
         obs_std_floor: float = 0.0,
+        value_hidden: tuple[int, ...] | None = None,
     ) -> None:
         super().__init__()
         self.obs_dim, self.act_dim = obs_dim, act_dim
@@ -77,7 +78,7 @@ class ActorCritic(nn.Module):
         self.obs_std_floor = obs_std_floor
         self.pi = mlp([obs_dim, *hidden, act_dim], out_gain=0.01)
         self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
-        self.v = mlp([obs_dim, *hidden, 1], out_gain=1.0)
+        self.v = mlp([obs_dim, *(hidden if value_hidden is None else value_hidden), 1], 1.0)
 
     def policy_parameters(self) -> list[nn.Parameter]:
         return [*self.pi.parameters(), self.log_std]

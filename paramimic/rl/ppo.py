@@ -95,7 +95,13 @@ class PPOLearner:
         self.cfg = cfg
         torch.manual_seed(seed)
         self.policy = ActorCritic(
-            obs_dim, act_dim, cfg.hidden_sizes, cfg.init_log_std, cfg.obs_clip, cfg.obs_std_floor
+            obs_dim,
+            act_dim,
+            cfg.hidden_sizes,
+            cfg.init_log_std,
+            cfg.obs_clip,
+            cfg.obs_std_floor,
+            cfg.value_hidden_sizes,
         )
         self.policy.log_std.requires_grad_(cfg.learn_std)
         trained = [p for p in self.policy.policy_parameters() if p.requires_grad]

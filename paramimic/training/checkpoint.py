@@ -317,7 +317,13 @@ def load_policy(path: Path | str):
 
     state = load(Path(path))
     cfg = ExperimentConfig.model_validate(state["config"])
-    policy = ActorCritic(state["obs_dim"], state["act_dim"], cfg.ppo.hidden_sizes, 0.0)
+    policy = ActorCritic(
+        state["obs_dim"],
+        state["act_dim"],
+        cfg.ppo.hidden_sizes,
+        0.0,
+        value_hidden=cfg.ppo.value_hidden_sizes,
+    )
     policy.load_state_dict(state["learner"]["policy"])
     policy.eval()
     return state, cfg, policy
