@@ -1,0 +1,278 @@
+"""The papers, reproduced row by row: each experiment at the paper's settings and at ours, with
+the paper's own number beside them. Not a timed test.
+
+Rows (ROWS below):
+- [WL19] Table 4: reward normalization on and off, biped (lower body) and quadruped; task
+  achievement and falls within 30 s on 300 bodies drawn with a seed the training never used.
+- [WL19] Fig. 6: k = 0 / 5 / 10 / 20 on walker_legs; the worst decile and the coefficient of
+  variation of the per-shape return over a 7 x 7 grid ("the higher k, the more uniform").
+- [L21] Table 2: A1 (m_a = m0), A2 (no time warp), A3 (ours) on the jump family: the gravity
+  range the elites cover.
+- [L21] §7.3: ER against episodes for the baseline, exploration-only, mastering, alternating
+  and ours (the runs of `benchmarks/curriculum.py --samplings`, read from its kept JSON).
+
+Each row runs in two arms: `paper` (the paper's recipe, `recipe: wl19` or `l21`: every
+departure switched to the paper's setting) and `ours` (the row's config as shipped). A run is
+the serial trainer in its own run directory (runs/reproduce/..., resumed where it stopped),
+evaluated once at its budget; its JSON goes to benchmarks/results/reproduce/.
+
+    python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--steps 2000000]
+    python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
+    python benchmarks/reproduce.py list
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from tabulate import tabulate
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+OUT = RESULTS / "reproduce"
+DOCS = ROOT / "docs" / "reproduce.md"
+EVAL_SEED = 10_000  # + the training seed: shapes the training never drew
+
+# row -> what it reproduces, the config, its variants (overrides), the paper's recipe, the
+# budget per run in env steps, what is measured, and the paper's numbers per variant
+ROWS: dict[str, dict] = {
+    "wl19_table4": {
+        "paper": "[WL19] Table 4",
+        "what": "reward normalization (RN) on/off; task achievement and falls in 30 s, 300 bodies",
+        "variants": {
+            "biped_lower_rn": ("configs/biped_lower.yaml", {"env.reward.normalize": True}),
+            "biped_lower_no_rn": ("configs/biped_lower.yaml", {"env.reward.normalize": False}),
+            "quadruped_rn": ("configs/quadruped.yaml", {"env.reward.normalize": True}),
+            "quadruped_no_rn": ("configs/quadruped.yaml", {"env.reward.normalize": False}),
+        },
+        "recipe": "wl19",
+        "steps": 2_000_000,
+        "measure": "family",
+        "paper_numbers": {
+            "biped_lower_rn": "369.54 task, 20.7 % falls",
+            "biped_lower_no_rn": "218.86 task, 54.1 % falls",
+            "quadruped_rn": "427.51 task, 9.3 % falls",
+            "quadruped_no_rn": "338.15 task, 11.1 % falls",
+        },
+    },
+    "wl19_fig6": {
+        "paper": "[WL19] Fig. 6",
+        "what": "uniformity k of the shape sampling; worst decile and CV of the per-shape return",
+        "variants": {
+            f"k{k}": ("configs/walker_legs.yaml", {"curriculum.k": float(k)})
+            for k in (0, 5, 10, 20)
+        },
+        "recipe": "wl19",
+        "steps": 2_000_000,
+        "measure": "family",
+        "paper_numbers": {
+            "k0": "the least uniform (Fig. 6a)",
+            "k5": "no number",
+            "k10": "more uniform than k = 0 (Fig. 6b)",
+            "k20": "no number",
+        },
+    },
+    "l21_table2": {
+        "paper": "[L21] Table 2",
+        "what": "A1 (m_a = m0) / A2 (no time warp) / A3 (ours): gravity range explored (jump)",
+        "variants": {
+            "A1": ("configs/walker_jump.yaml", {"curriculum.skill.motion_parameterization": False}),
+            "A2": ("configs/walker_jump.yaml", {"env.skill.time_warp": False}),
+            "A3": ("configs/walker_jump.yaml", {}),
+        },  # fmt: skip
+        "recipe": "l21",
+        "steps": 2_000_000,
+        "measure": "skill",
+        "paper_numbers": {
+            "A1": "gravity [0.4, 1.65]",
+            "A2": "gravity [0.3, 1.65]",
+            "A3": "gravity [0.2, 1.65]",
+        },
+    },
+}
+CURRICULA = ("uniform", "exploration_only", "mastering", "alternating", "curriculum")
+CURRICULA_PAPER = {
+    "uniform": "Jump: 43 % explored on average",
+    "exploration_only": "Jump: 87 %, Push: 80 %",
+    "mastering": "explores the hard examples",
+    "alternating": "explores the hard examples",
+    "curriculum": "the best balance in every example",
+}
+
+
+def paper_settings(recipe: str) -> dict:
+    """Every field of a paper's recipe as an override: in the paper arm the paper's setting
+    wins even where the row's config sets its own (a config's field otherwise wins)."""
+    from paramimic.recipes import preset
+
+    values = {k: list(s.value) if isinstance(s.value, tuple) else s.value
+              for k, s in preset(recipe).items()}  # fmt: skip
+    return {"recipe": recipe} | values
+
+
+def result_path(row: str, arm: str, variant: str, seed: int, steps: int) -> Path:
+    return OUT / f"{row}_{arm}_{variant}_s{seed}_{steps // 1000}k.json"
+
+
+def run_one(row: str, arm: str, variant: str, seed: int, steps: int) -> dict:
+    """Train one variant of a row in one arm to `steps` (resumed from its run directory), then
+    evaluate it; the JSON is kept and not run again."""
+    import torch
+
+    from paramimic.config import load_config
+    from paramimic.evaluation import evaluate_config
+    from paramimic.training.trainer import train_serial
+
+    spec = ROWS[row]
+    config, overrides = spec["variants"][variant]
+    arm_overrides = paper_settings(spec["recipe"]) if arm == "paper" else {}
+    run_dir = ROOT / "runs" / "reproduce" / row / arm / f"{variant}_s{seed}"
+    cfg = load_config(
+        ROOT / config,
+        arm_overrides | overrides | {"train.seed": seed, "train.run_dir": str(run_dir)},
+    )
+    torch.manual_seed(seed)
+    t0 = time.perf_counter()
+    trainer = train_serial(cfg, steps, run_dir)
+    seconds = time.perf_counter() - t0
+    out = {"row": row, "arm": arm, "variant": variant, "seed": seed, "config": config,
+           "overrides": arm_overrides | overrides, "env_steps": trainer.progress.env_steps,
+           "train_seconds": seconds}  # fmt: skip
+    if spec["measure"] == "family":
+        report = evaluate_config(trainer.learner.policy, cfg, 300, EVAL_SEED + seed, 7, 30.0)
+        grid = report.pop("grid")
+        out["report"] = report | {"grid_uniformity": grid["uniformity"]}
+    else:
+        c = trainer.curriculum
+        live = c.elites.live()
+        params = c.elites.params[live]
+        out["report"] = {
+            "explored_ratio": c.explored_ratio(),
+            "episodes": int(c.stats["episodes"]),
+            "elites": int(len(live)),
+            "ranges": {
+                n: [float(params[:, i].min()), float(params[:, i].max())] if len(params) else None
+                for i, n in enumerate(c.space.names)
+            },
+        }
+    path = result_path(row, arm, variant, seed, steps)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(out, indent=2))
+    print(f"wrote {path}")
+    return out
+
+
+def _cell(row: str, results: list[dict]) -> str:
+    """Mean over seeds (each seed in brackets) of a row's measure."""
+    if not results:
+        return "not run yet"
+    reps = [r["report"] for r in results]
+    seeds = ", ".join(str(r["seed"]) for r in results)
+    if ROWS[row]["measure"] == "family":
+        falls = [x["fall_percent"] for x in reps]
+        task = [x["task_achievement"] for x in reps]
+        worst = [x["worst_decile_return"] for x in reps]
+        cv = [x["grid_uniformity"]["coefficient_of_variation"] for x in reps]
+        return (f"{np.mean(task):.1f} task, {np.mean(falls):.1f} % falls, worst decile "
+                f"{np.mean(worst):.1f}, CV {np.mean(cv):.2f} (seeds {seeds}; falls "
+                + " / ".join(f"{f:.1f}" for f in falls) + ")")  # fmt: skip
+    ranges = [x["ranges"].get("gravity") for x in reps]
+    er = [x["explored_ratio"] for x in reps]
+    shown = " / ".join("none" if r is None else f"[{r[0]:.2f}, {r[1]:.2f}]" for r in ranges)
+    return f"gravity {shown}, ER {np.mean(er):.2f} (seeds {seeds})"
+
+
+def departures() -> str:
+    """Every field a paper's recipe sets, beside ours (the library default or our recipes')."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.recipes import PRESETS, flatten
+
+    default = flatten(ExperimentConfig().model_dump(mode="json"))
+    names = ("wl19", "l21", "paramimic_walker", "paramimic_humanoid")
+    fields = sorted({f for n in names for f in PRESETS[n]})
+
+    def shown(name: str, field: str) -> str:
+        s = PRESETS[name].get(field)
+        return "" if s is None else json.dumps(list(s.value) if isinstance(s.value, tuple)
+                                               else s.value)  # fmt: skip
+
+    rows = [[f, json.dumps(default.get(f)), *(shown(n, f) for n in names)] for f in fields]
+    return tabulate(rows, ["field", "library default", *names], tablefmt="github")
+
+
+def table() -> str:
+    rows = []
+    for row, spec in ROWS.items():
+        for variant in spec["variants"]:
+            cells = {}
+            for arm in ("paper", "ours"):
+                paths = sorted(OUT.glob(f"{row}_{arm}_{variant}_s*_*k.json"))
+                found = [json.loads(p.read_text()) for p in paths]
+                cells[arm] = _cell(row, found)
+            budget = f"{spec['steps'] / 1e6:.0f}M per run"
+            rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
+                         cells["paper"], cells["ours"], budget])  # fmt: skip
+    kept = RESULTS / "curriculum_runs"
+    for sampling in CURRICULA:
+        runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
+        cell = "not run yet"
+        if runs:
+            er = [r["curve"][-1]["explored_ratio"] for r in runs]
+            n = [r["curve"][-1]["episodes"] for r in runs]
+            cell = (f"ER {np.mean(er):.2f} at N = {np.mean(n):,.0f} (seeds "
+                    + ", ".join(str(r["seed"]) for r in runs) + ")")  # fmt: skip
+        steps = f"{runs[0]['steps'] / 1e6:.1f}M per run" if runs else ""
+        rows.append(["[L21] §7.3", sampling, CURRICULA_PAPER[sampling], "", cell, steps])
+    header = ["paper", "variant", "the paper's number", "paper's settings", "ours", "budget"]
+    body = tabulate(rows, header, tablefmt="github")
+    text = DOCS.read_text()
+    sections = {"rows": body, "departures": departures()}
+    for name, part in sections.items():
+        marks = (f"<!-- {name} -->", f"<!-- /{name} -->")
+        head, rest = text.split(marks[0], 1)
+        _, tail = rest.split(marks[1], 1)
+        text = f"{head}{marks[0]}\n{part}\n{marks[1]}{tail}"
+    DOCS.write_text(text)
+    (RESULTS / "reproduce.json").write_text(json.dumps({"rows": rows, "header": header}, indent=1))
+    return body
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("row", choices=sorted(ROWS))
+    r.add_argument("--arm", choices=("paper", "ours"), default="ours")
+    r.add_argument("--variants", default=None, help="comma-separated; default: every variant")
+    r.add_argument("--seeds", default="0,1,2")
+    r.add_argument("--steps", type=int, default=None, help="default: the row's budget")
+    sub.add_parser("table")
+    sub.add_parser("list")
+    args = ap.parse_args()
+    if args.cmd == "list":
+        for row, spec in ROWS.items():
+            print(f"{row:12s} {spec['paper']:16s} {spec['what']}; variants "
+                  f"{', '.join(spec['variants'])}; {spec['steps']:,} steps per run")  # fmt: skip
+        return
+    if args.cmd == "table":
+        print(table())
+        return
+    spec = ROWS[args.row]
+    steps = args.steps or spec["steps"]
+    variants = args.variants.split(",") if args.variants else list(spec["variants"])
+    for variant in variants:
+        if variant not in spec["variants"]:
+            raise SystemExit(f"{args.row}: no variant {variant!r}; known: {list(spec['variants'])}")
+        for seed in (int(s) for s in args.seeds.split(",")):
+            if result_path(args.row, args.arm, variant, seed, steps).exists():
+                print(f"kept: {args.row} {args.arm} {variant} seed {seed}")
+                continue
+            run_one(args.row, args.arm, variant, seed, steps)
+
+
+if __name__ == "__main__":
+    main()
