@@ -617,6 +617,11 @@ class TrainConfig(Section):
     total_steps: int = Field(2_000_000, ge=1, description="environment steps to train for")
     seed: Seed = 0
     checkpoint_every: int = Field(10, ge=1, description="iterations between checkpoints")
+    tensorboard: bool = Field(
+        True,
+        description="TensorBoard event files in the run's tensorboard/ folder: every metric per "
+        "env step, the curriculum's state and the V̄ map (`tensorboard --logdir runs`)",
+    )
     keep_checkpoints: int | None = Field(
         5, ge=1, description="ckpt_*.pt files kept (older ones are pruned); null: keep all"
     )

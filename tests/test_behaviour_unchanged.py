@@ -35,6 +35,10 @@ CONFIGS = {
                                  "p_every": 1}},
     },
 }  # fmt: skip
+# float rounding differs between CPUs (the kernels torch picks for the machine): on a machine
+# with AMX the recorded runs differ by up to 4e-5 relative; a change to training (another random
+# draw, another step) moves them by far more
+RTOL = 1e-3
 WALL_CLOCK = {"time", "steps_per_second", "sample_steps_per_second"}
 
 
@@ -58,7 +62,7 @@ def test_a_fixed_seed_serial_run_gives_the_recorded_metrics(name):
         assert row.keys() == want.keys(), it
         for key, value in want.items():
             if isinstance(value, float):
-                assert row[key] == pytest.approx(value, rel=1e-6, abs=1e-9), (it, key)
+                assert row[key] == pytest.approx(value, rel=RTOL, abs=1e-9), (it, key)
             else:
                 assert row[key] == value, (it, key)
 

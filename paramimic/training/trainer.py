@@ -38,6 +38,7 @@ from paramimic.task_space import TaskSpace
 from paramimic.training import checkpoint
 from paramimic.training.curriculum import Curriculum, WideningCurriculum
 from paramimic.training.method import Method, method_for
+from paramimic.training.tensorboard import TensorBoardLog
 
 
 class StopRequested(Exception):
@@ -304,6 +305,14 @@ class Trainer:
             "edge_env_steps": sum(r.length for r in results),
         }
 
+    def _board(self, board: TensorBoardLog, row: dict) -> None:
+        """A metrics row, the curriculum's summary and, every checkpoint interval, the V̄ map."""
+        board.metrics(row, self.curriculum.summary())
+        if self.progress.iteration % self.cfg.train.checkpoint_every == 0:
+            board.marginal_map(
+                self.space, self.cfg.display_dims(), self.marginal.predict, row["env_steps"]
+            )
+
     def _metrics_log(self) -> MetricsLog:
         """metrics.jsonl to append to, without the rows of iterations this run's state never
         saw: a run stopped between checkpoints resumes from the last one, and the iterations
@@ -367,6 +376,11 @@ class Trainer:
 
         self.run_dir.mkdir(parents=True, exist_ok=True)
         log = self._metrics_log()
+        board = (
+            TensorBoardLog(self.run_dir / "tensorboard", self.progress.env_steps)
+            if self.cfg.train.tensorboard
+            else None
+        )
         try:
             while self.progress.env_steps < total_steps and not should_stop():
                 if before_iteration:
@@ -379,6 +393,8 @@ class Trainer:
                     break
                 check_write()
                 log.write(json.dumps(m) + "\n")
+                if board is not None:
+                    self._board(board, m)
                 if on_metrics:
                     on_metrics(m)
                 if self.bad_updates >= self.cfg.train.max_bad_updates:
@@ -391,6 +407,8 @@ class Trainer:
                     checkpoint_now()
         finally:
             log.close()
+            if board is not None:
+                board.close()
             if refused:
                 pass  # the run is no longer this learner's to write
             elif self._consistent:

@@ -1,0 +1,121 @@
+"""TensorBoard event files beside metrics.jsonl: every scalar of a metrics row, the curriculum's
+state and the [WL19] V̄ map as an image, per env step (`tensorboard --logdir runs`).
+
+Written with torch's `SummaryWriter` (torch.utils.tensorboard, which needs the `tensorboard`
+package): the writer RL users already have beside torch, and TensorBoard's own format. A run
+resumed from an older checkpoint purges the events past it (`purge_step`), as metrics.jsonl
+drops its rows. Writing never ends a run: an event the disk refuses is lost with a warning.
+"""
+
+from __future__ import annotations
+
+import logging
+import numbers
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+
+from paramimic.messages import CurriculumSummary
+from paramimic.task_space import TaskSpace
+
+# metrics row key -> TensorBoard group (anything else: "run/")
+GROUPS = {
+    "ppo": ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_fraction", "skipped_steps",
+            "update_steps", "explained_variance", "std", "policy_lr", "marginal_loss"),
+    "episodes": ("episodes", "mean_return", "mean_length", "fall_percent", "diverged",
+                 "deviated_percent", "mean_step_reward", "edge_fall_percent"),
+    "speed": ("steps_per_second", "sample_steps_per_second", "policy_lag"),
+    "actors": ("actors", "nodes", "actor_restarts", "actors_lost", "dropped_fragments",
+               "fragment_errors"),
+    "curriculum": ("mu", "range_width", "motion_version", "motion_loss"),
+}  # fmt: skip
+SKIPPED = {"time", "env_steps", "stage"}
+SUMMARY = ("k", "buffer_size", "refills", "explored_ratio", "exploration_rate_surrounding",
+           "exploration_rate_visited", "elites", "elite_mean_fitness",
+           "phase_switches")  # fmt: skip
+PHASES = {"exploration": 0.0, "refinement": 1.0}
+STAGES = {"base": 0.0, "proxy": 1.0, "mixed": 2.0}
+TAG_OF = {key: f"{group}/{key}" for group, keys in GROUPS.items() for key in keys}
+
+
+def tag(key: str) -> str:
+    return TAG_OF.get(key, f"run/{key}")
+
+
+class TensorBoardLog:
+    def __init__(self, log_dir: Path, purge_step: int) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(str(log_dir), purge_step=purge_step or None)
+        self.failing = False
+
+    def _guard(self, write: Callable[[], None]) -> None:
+        try:
+            write()
+        except OSError as e:
+            if not self.failing:
+                logging.getLogger(__name__).warning(f"TensorBoard events not written ({e})")
+            self.failing = True
+
+    def metrics(self, row: Mapping, summary: CurriculumSummary | None = None) -> None:
+        """The numeric values of a metrics row and of the curriculum's summary, at the row's
+        env steps; the [L21] bootstrap stage and phase as numbers (base 0, proxy 1, mixed 2;
+        exploration 0, refinement 1)."""
+        step = int(row["env_steps"])
+        values = {tag(k): v for k, v in row.items() if k not in SKIPPED and _number(v)}
+        if row.get("stage") in STAGES:
+            values["curriculum/stage"] = STAGES[row["stage"]]
+        if summary is not None:
+            for name in SUMMARY:
+                value = getattr(summary, name)
+                if _number(value):
+                    values[f"curriculum/{name}"] = value
+            if summary.phase in PHASES:
+                values["curriculum/phase"] = PHASES[summary.phase]
+
+        def write() -> None:
+            for key, value in values.items():
+                self.writer.add_scalar(key, float(value), step)
+
+        self._guard(write)
+
+    def marginal_map(
+        self,
+        space: TaskSpace,
+        dims: tuple[str, ...],
+        predict: Callable[[np.ndarray], np.ndarray],
+        step: int,
+        n: int = 21,
+    ) -> None:
+        """[WL19]'s V̄ over the two display dims (others at the box centre) as a heatmap."""
+        if len(dims) != 2:
+            return
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        xs, ys, pts = space.grid(dims, n)
+        values = predict(pts).reshape(len(ys), len(xs))
+        fig, ax = plt.subplots(figsize=(4, 3.4))
+        im = ax.imshow(values, origin="lower", aspect="auto", cmap="viridis",
+                       extent=(xs[0], xs[-1], ys[0], ys[-1]))  # fmt: skip
+        ax.set_xlabel(dims[0])
+        ax.set_ylabel(dims[1])
+        ax.set_title("marginal value V̄")
+        fig.colorbar(im, ax=ax)
+        fig.tight_layout()
+        self._guard(lambda: self.writer.add_figure("curriculum/marginal_value", fig, step))
+        plt.close(fig)
+
+    def close(self) -> None:
+        self._guard(self.writer.close)
+
+
+def _number(value) -> bool:
+    return (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and np.isfinite(float(value))
+    )
