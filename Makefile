@@ -7,7 +7,7 @@ CONFIG ?= configs/walker_legs.yaml
 # every install takes its versions from constraints.txt (refresh it with `make lock`)
 PIP_C := -c constraints.txt
 
-.PHONY: train test test-deps lint bench clean gl rllib-venv lock
+.PHONY: train test test-deps lint bench clean gl rllib-venv lock docs
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -18,13 +18,13 @@ $(VENV)/.installed: pyproject.toml constraints.txt | $(BIN)/python
 	touch $@
 
 $(VENV)/.installed-test: pyproject.toml constraints.txt | $(BIN)/python
-	$(BIN)/pip install $(PIP_C) -e ".[test]"
+	$(BIN)/pip install $(PIP_C) -e ".[test,docs]"
 	touch $@
 
 # constraints.txt from a clean venv with every extra: run after changing a dependency range
 lock:
 	rm -rf .venv-lock && $(PY) -m venv .venv-lock && .venv-lock/bin/pip install -q --upgrade pip
-	.venv-lock/bin/pip install -e ".[test,bench,export]"
+	.venv-lock/bin/pip install -e ".[test,bench,export,docs]"
 	{ echo "# Exact versions for make, CI and the image (pip install -c constraints.txt ...)."; \
 	  echo "# Refresh: make lock (a clean venv with every extra, then pip freeze)."; \
 	  .venv-lock/bin/pip freeze --exclude-editable | grep -v '^pip==\|^setuptools==' \
@@ -57,7 +57,12 @@ test-deps:
 
 test: $(VENV)/.installed-test gl test-deps
 	$(BIN)/ruff check paramimic services tests benchmarks
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python -m pytest tests --durations=15
+
+# the documentation site at http://127.0.0.1:8001 while you edit docs/
+docs: $(VENV)/.installed-test
+	$(BIN)/mkdocs serve -a 127.0.0.1:8001
 
 # RLlib, the peer arm of benchmarks/throughput.py, in its own venv: ray[rllib] pins its own
 # gymnasium; torch pinned to the CPU build; this repo installed without its deps.
@@ -82,4 +87,4 @@ bench: $(VENV)/.installed-test rllib-venv
 	$(BIN)/python benchmarks/physics_rate.py speed fidelity divergence
 
 clean:
-	rm -rf $(VENV) $(RLLIB) runs .pytest_cache
+	rm -rf $(VENV) $(RLLIB) runs .pytest_cache site

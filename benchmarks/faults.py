@@ -411,7 +411,7 @@ def _quietly(f) -> None:
 
 
 def table(rows: list[dict]) -> str:
-    """The README's fault table."""
+    """The fault table of docs/security.md."""
     header = ["fault", "injected", "outcome", "episodes lost / uncounted / double-counted",
               "elites lost (replaced)", "recovery s (mean, max)", "processes left"]  # fmt: skip
     lines = []

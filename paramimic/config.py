@@ -395,7 +395,7 @@ class PPOConfig(Section):
     learn_std: bool = Field(
         True,
         description="false: the policy std stays at exp(init_log_std), as imitation "
-        "controllers keep it (DeepMimic; README 'Families that learn')",
+        "controllers keep it (DeepMimic; docs/results/families-that-learn.md)",
     )
     desired_kl: PositiveFloat | None = Field(
         None,

@@ -327,18 +327,30 @@ def _parse_shapes(text: str, names: tuple[str, ...]) -> list[dict[str, float]]:
     return shapes
 
 
+def _default_bodies(space, dims: tuple[str, ...]) -> list[dict[str, float]]:
+    """The base body first, then the corners of the display dims (the ends of one dim)."""
+    ranges = space.ranges()
+    if not dims:
+        return [{}]
+    if len(dims) == 1:
+        return [{}, *({dims[0]: v} for v in ranges[dims[0]])]
+    (x0, x1), (y0, y1) = ranges[dims[0]], ranges[dims[1]]
+    return [{}, *({dims[0]: x, dims[1]: y} for y in (y0, y1) for x in (x0, x1))]
+
+
 @app.command()
 def render(
     run: Annotated[
         Path, typer.Argument(help="run directory, checkpoint file or shipped controller name")
     ],
     shapes: Annotated[
-        str,
+        str | None,
         typer.Option(
             help="bodies as task parameters, ';' between bodies: 'global_z=0.6;global_z=1.4' "
-            "(unnamed parameters sit at the center of the task space)"
+            "(unnamed parameters sit at the base body, or the task space's centre); default: "
+            "the base body and the four corners of the config's two display dims"
         ),
-    ],
+    ] = None,
     out: Annotated[Path, typer.Option(help="family.gif or family.mp4")] = Path("family.gif"),
     seconds: Annotated[float, typer.Option(help="length of the clip")] = 4.0,
     width: Annotated[int, typer.Option(help="pixels per body")] = 320,
@@ -364,10 +376,16 @@ def render(
     cfg, policy, _ = _load_policy(run, max(seconds, 1.0))
     env = env_for(cfg)
     space = env.task_space
-    bodies = _parse_shapes(shapes, space.names)
+    dims = cfg.display_dims()
+    bodies = _parse_shapes(shapes, space.names) if shapes else _default_bodies(space, dims)
+    base = space.center.copy()
+    shape_names = set(env.definition.param_names())
+    for i, name in enumerate(space.names):  # the base body where the range holds it
+        if name in shape_names and space.low[i] <= 1.0 <= space.high[i]:
+            base[i] = 1.0
     tasks = []
     for shape in bodies:
-        a = space.center.copy()
+        a = base.copy()
         for name, value in shape.items():
             a[space.names.index(name)] = value
         if not space.contains(a)[0]:

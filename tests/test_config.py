@@ -115,8 +115,9 @@ def test_shape_scale_shrinks_every_documented_range_toward_the_base_body(tmp_pat
 @pytest.mark.parametrize("character", ["quadruped", "biped"])
 def test_a_x05_family_config_is_its_base_stage_widened(character):
     """configs/<character>_x0.5.yaml warm starts from configs/<character>_base.yaml's run: the
-    same body, rules and PPO but for what the family stage adds (README "Families that
-    learn"): retargeted legs, the small step, and for the biped a range grown from the base."""
+    same body, rules and PPO but for what the family stage adds
+    (docs/results/families-that-learn.md): retargeted legs, the small step, and for the biped
+    a range grown from the base."""
     root = Path(__file__).parent.parent / "configs"
     base = load_config(root / f"{character}_base.yaml").model_dump()
     family = load_config(root / f"{character}_x0.5.yaml").model_dump()

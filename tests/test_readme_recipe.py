@@ -1,4 +1,4 @@
-"""The README's multi-machine recipe, run for real: the Redis config it writes holds the
+"""The multi-machine recipe of docs/training.md, run for real: the Redis config it writes holds the
 password in a file only its owner reads, and the Redis it starts answers on loopback only."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def _recipe() -> list[str]:
     """The head machine's block of "More machines without containers"."""
-    text = (ROOT / "README.md").read_text()
+    text = (ROOT / "docs" / "training.md").read_text()
     section = text.split("## More machines without containers", 1)[1]
     block = re.search(r"```bash\n(.*?)```", section, re.S).group(1)
     return block.replace("\\\n", " ").splitlines()

@@ -111,3 +111,16 @@ def test_morph_path_interpolates_piecewise_linearly():
     assert morph_path(path, 0.5) == {"a": 2.0}
     assert morph_path(path, 0.75) == {"a": 1.0}
     assert morph_path(path, 1.0) == {"a": 0.0}
+
+
+def test_render_without_shapes_shows_the_base_body_and_the_four_corners(biped_run, tmp_path):
+    out = tmp_path / "first_look.gif"
+    res = _cli("render", biped_run, "--out", out, "--seconds", 0.2, "--width", 64,
+               "--height", 48)  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    frames = iio.imread(out)
+    assert frames.shape[1:3] == (48, 5 * 64)  # the base body and 4 corners of global_z x thigh_l_z
+    first = frames[0][..., :3].astype(int)
+    panels = [first[:, i * 64 : (i + 1) * 64] for i in range(5)]
+    # the short corners (global_z 0.6) and the tall ones (1.4) are different pictures
+    assert np.abs(panels[1] - panels[2]).mean() > 1.0

@@ -84,7 +84,7 @@ def test_wl19_product_of_the_bells():
     assert wl19_reward_product(ones, w) == pytest.approx(1.0)
     # a body that stands still meets the end-effector, direction and torque bells: the sum
     # still pays it half of a walking step, the product a twentieth (terms as measured on the
-    # walker: a standing and a walking controller, README "Families that learn")
+    # walker: a standing and a walking controller, docs/results/families-that-learn.md)
     stand = WL19Terms(0.39, 0.17, np.array([0.86, 0.86]), 0.28, 1.0, 0.63)
     walk = WL19Terms(0.91, 0.46, np.array([1.0, 1.0]), 0.97, 1.0, 0.38)
     assert wl19_reward(stand, w) / wl19_reward(walk, w) > 0.6

@@ -1,7 +1,7 @@
 """A Ray cluster of separate `ray start` processes on this machine: a head and worker nodes,
 each worker in its own network namespace joined to the host by a veth pair when this process
-may make one (root and `ip netns`), else on loopback. What the README's "more machines" steps
-do, on one machine: for the multi-node tests and benchmarks/scaling.py.
+may make one (root and `ip netns`), else on loopback. What docs/training.md's "more machines"
+steps do, on one machine: for the multi-node tests and benchmarks/scaling.py.
 
 Token authentication is on (RAY_AUTH_MODE=token, a fresh RAY_AUTH_TOKEN shared by every node
 and handed to drivers through `env`).
