@@ -56,7 +56,7 @@ test-deps:
 	  else echo "warning: missing some of $(TEST_APT): the browser and compose tests skip"; fi; fi
 
 test: $(VENV)/.installed-test gl test-deps
-	$(BIN)/ruff check paramimic services tests benchmarks
+	$(BIN)/ruff check paramimic services tests benchmarks docs/hooks
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python -m pytest tests --durations=15
 
