@@ -9,6 +9,7 @@ drops its rows. Writing never ends a run: an event the disk refuses is lost with
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import numbers
 from collections.abc import Callable, Mapping
@@ -45,18 +46,37 @@ def tag(key: str) -> str:
 
 class TensorBoardLog:
     def __init__(self, log_dir: Path, purge_step: int) -> None:
+        self.log_dir, self.purge_step = log_dir, purge_step
+        self.writer = None
+        self.failing = False
+        self._open()
+
+    def _open(self) -> None:
+        """A writer (a new event file); after a failed write the old one is dropped, since its
+        thread died with the error, and the next write opens another."""
         from torch.utils.tensorboard import SummaryWriter
 
-        self.writer = SummaryWriter(str(log_dir), purge_step=purge_step or None)
-        self.failing = False
+        try:
+            self.writer = SummaryWriter(str(self.log_dir), purge_step=self.purge_step or None)
+            self.purge_step = 0  # a reopened writer purges nothing written since
+        except OSError as e:
+            self._failed(e)
+
+    def _failed(self, error: OSError) -> None:
+        if not self.failing:
+            logging.getLogger(__name__).warning(f"TensorBoard events not written ({error})")
+        self.failing, self.writer = True, None
 
     def _guard(self, write: Callable[[], None]) -> None:
+        if self.writer is None:
+            self._open()
+            if self.writer is None:
+                return
         try:
             write()
+            self.failing = False
         except OSError as e:
-            if not self.failing:
-                logging.getLogger(__name__).warning(f"TensorBoard events not written ({e})")
-            self.failing = True
+            self._failed(e)
 
     def metrics(self, row: Mapping, summary: CurriculumSummary | None = None) -> None:
         """The numeric values of a metrics row and of the curriculum's summary, at the row's
@@ -110,7 +130,9 @@ class TensorBoardLog:
         plt.close(fig)
 
     def close(self) -> None:
-        self._guard(self.writer.close)
+        if self.writer is not None:
+            with contextlib.suppress(OSError):
+                self.writer.close()
 
 
 def _number(value) -> bool:
