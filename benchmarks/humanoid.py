@@ -58,6 +58,7 @@ MARK = ("<!-- results -->", "<!-- /results -->")
 SCREEN_MARK = ("<!-- screens -->", "<!-- /screens -->")
 SPEED_MARK = ("<!-- speed -->", "<!-- /speed -->")
 SKILL_MARK = ("<!-- skills -->", "<!-- /skills -->")
+PRECISION_MARK = ("<!-- precision -->", "<!-- /precision -->")
 SCREENS = RESULTS / "humanoid_screens"
 SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 
@@ -562,8 +563,23 @@ def precision(controller: str, steps: int, repeats: int) -> dict:
     }
     path = RESULTS / "humanoid_precision.json"
     path.write_text(json.dumps(out, indent=2))
+    _write_section(PRECISION_MARK, _precision_text(out))
     print(json.dumps(out, indent=2))
     return out
+
+
+def _precision_text(r: dict) -> str:
+    """The sentence of docs/humanoid.md on the bfloat16 update, from its JSON."""
+    speed = r["update_samples_per_s"]
+    return (
+        f"{speed['float32']:,.0f} samples/s in float32 and {speed['bfloat16']:,.0f} in "
+        f"bfloat16 ({r['update_speedup']:.1f}x); at an unchanged policy the log-probabilities "
+        f"log π/π_old of the float32 actors against the bfloat16 learner move by "
+        f"{r['log_ratio_std']:.3f} (standard deviation; at most {r['log_ratio_max_abs']:.3f}, "
+        f"{100 * r['ratio_outside_clip_share']:.1f} % of the ratios outside PPO's clip of 0.2), "
+        f"and the value by {r['value_mean_abs_error']:.3f} on a mean of "
+        f"{r['value_mean_abs']:.1f}."
+    )
 
 
 def main() -> None:

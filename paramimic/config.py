@@ -406,8 +406,8 @@ class PPOConfig(Section):
         "float32",
         description="the number format of the update's matrix products: bfloat16 runs the "
         "forward and backward passes under torch's CPU autocast (weights, optimizer, log-probs "
-        "and losses stay float32; 5-8x faster on CPUs with AMX or AVX512-BF16, far slower "
-        "without); auto: bfloat16 where the CPU has either, else float32",
+        "and losses stay float32; faster on CPUs with AMX or AVX512-BF16 (docs/humanoid.md), "
+        "far slower without); auto: bfloat16 where the CPU has either, else float32",
     )
     obs_clip: PositiveFloat = Field(10.0, description="clip of normalized observations")
     obs_std_floor: NonNegativeFloat = Field(
