@@ -622,6 +622,12 @@ class TrainConfig(Section):
         description="TensorBoard event files in the run's tensorboard/ folder: every metric per "
         "env step, the curriculum's state and the V̄ map (`tensorboard --logdir runs`)",
     )
+    wandb: Literal["off", "online", "offline"] = Field(
+        "off",
+        description="Weights & Biases (the `wandb` extra): the same curves in a W&B run, its files "
+        "in the run's wandb/ folder; offline needs no network or account (`wandb sync` later)",
+    )
+    wandb_project: str = Field("paramimic", description="the W&B project of `train.wandb`")
     keep_checkpoints: int | None = Field(
         5, ge=1, description="ckpt_*.pt files kept (older ones are pruned); null: keep all"
     )

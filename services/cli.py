@@ -76,6 +76,13 @@ def train(
         ),
     ] = None,
     total_steps: Annotated[int | None, typer.Option(help="override train.total_steps")] = None,
+    wandb: Annotated[
+        str | None,
+        typer.Option(
+            help="online or offline: also log to Weights & Biases (pip install '.[wandb]'); "
+            "offline needs no network ('wandb sync RUN_DIR/wandb/offline-run-*' uploads it)"
+        ),
+    ] = None,
     run_dir: Annotated[Path | None, typer.Option(help="override train.run_dir")] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="continue from the run's latest checkpoint")
@@ -104,6 +111,7 @@ def train(
         for k, v in {
             "train.total_steps": total_steps,
             "train.seed": seed,
+            "train.wandb": wandb,
             "train.run_dir": str(run_dir) if run_dir else None,
             "train.init_from": str(init_from) if init_from else None,
         }.items()

@@ -30,7 +30,7 @@ TORCH_MODULES = {
     "paramimic.curriculum.parameterization_net",
     "paramimic.training.trainer",  # PPO, V̄ and P_θ on torch's threads
     "paramimic.training.checkpoint",  # tensors on disk
-    "paramimic.training.tensorboard",  # torch's SummaryWriter writes the event files
+    "paramimic.training.tracking",  # torch's SummaryWriter writes TensorBoard's events
 }
 # services/<kind>/ import the library and these shared modules, not each other's packages;
 # the launcher and the CLI compose them.

@@ -38,7 +38,7 @@ from paramimic.task_space import TaskSpace
 from paramimic.training import checkpoint
 from paramimic.training.curriculum import Curriculum, WideningCurriculum
 from paramimic.training.method import Method, method_for
-from paramimic.training.tensorboard import TensorBoardLog
+from paramimic.training.tracking import TensorBoardLog, WandbLog, marginal_figure
 
 
 class StopRequested(Exception):
@@ -305,13 +305,24 @@ class Trainer:
             "edge_env_steps": sum(r.length for r in results),
         }
 
-    def _board(self, board: TensorBoardLog, row: dict) -> None:
+    def _boards(self) -> list:
+        """Where the curves go besides metrics.jsonl: TensorBoard, and W&B when asked for."""
+        t = self.cfg.train
+        boards: list = []
+        if t.tensorboard:
+            boards.append(TensorBoardLog(self.run_dir / "tensorboard", self.progress.env_steps))
+        if t.wandb != "off":
+            name = self.run_dir.name
+            config = self.cfg.model_dump(mode="json", exclude={"env": {"clip_texts"}})
+            boards.append(WandbLog(self.run_dir, name, t.wandb, t.wandb_project, config))
+        return boards
+
+    def _board(self, board: TensorBoardLog | WandbLog, row: dict) -> None:
         """A metrics row, the curriculum's summary and, every checkpoint interval, the V̄ map."""
-        board.metrics(row, self.curriculum.summary())
+        fig = None
         if self.progress.iteration % self.cfg.train.checkpoint_every == 0:
-            board.marginal_map(
-                self.space, self.cfg.display_dims(), self.marginal.predict, row["env_steps"]
-            )
+            fig = marginal_figure(self.space, self.cfg.display_dims(), self.marginal.predict)
+        board.log(row, self.curriculum.summary(), fig)
 
     def _metrics_log(self) -> MetricsLog:
         """metrics.jsonl to append to, without the rows of iterations this run's state never
@@ -376,11 +387,7 @@ class Trainer:
 
         self.run_dir.mkdir(parents=True, exist_ok=True)
         log = self._metrics_log()
-        board = (
-            TensorBoardLog(self.run_dir / "tensorboard", self.progress.env_steps)
-            if self.cfg.train.tensorboard
-            else None
-        )
+        boards = self._boards()
         try:
             while self.progress.env_steps < total_steps and not should_stop():
                 if before_iteration:
@@ -393,7 +400,7 @@ class Trainer:
                     break
                 check_write()
                 log.write(json.dumps(m) + "\n")
-                if board is not None:
+                for board in boards:
                     self._board(board, m)
                 if on_metrics:
                     on_metrics(m)
@@ -407,7 +414,7 @@ class Trainer:
                     checkpoint_now()
         finally:
             log.close()
-            if board is not None:
+            for board in boards:
                 board.close()
             if refused:
                 pass  # the run is no longer this learner's to write

@@ -1,13 +1,15 @@
-"""TensorBoard event files of real short runs, read back with TensorBoard's own reader."""
+"""A run's curves in TensorBoard and Weights & Biases, from real short runs, read back with
+TensorBoard's own reader and W&B's own CLI."""
 
 import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from paramimic.config import ExperimentConfig
-from paramimic.training.tensorboard import TensorBoardLog
+from paramimic.training.tracking import TensorBoardLog
 from paramimic.training.trainer import train_serial
 
 WL19 = {
@@ -67,12 +69,44 @@ def test_an_l21_run_has_its_stage_elites_and_explored_ratio(tmp_path):
 def test_a_resumed_run_drops_the_events_past_its_checkpoint(tmp_path):
     first = TensorBoardLog(tmp_path / "tb", 0)
     for step in (100, 200, 300):
-        first.metrics({"env_steps": step, "mean_return": float(step)})
+        first.log({"env_steps": step, "mean_return": float(step)})
     first.close()
     again = TensorBoardLog(tmp_path / "tb", 200)  # resumed from the checkpoint at 200
-    again.metrics({"env_steps": 300, "mean_return": -1.0})
+    again.log({"env_steps": 300, "mean_return": -1.0})
     again.close()
     acc = EventAccumulator(str(tmp_path / "tb"))
     acc.Reload()
     points = [(e.step, e.value) for e in acc.Scalars("episodes/mean_return")]
     assert points == [(100, 100.0), (300, -1.0)]
+
+
+def test_weights_and_biases_offline_gets_the_same_curves_without_a_network(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    cfg = ExperimentConfig.model_validate(WL19 | {"train": {"checkpoint_every": 2,
+                                                           "wandb": "offline"}})  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WANDB_")}
+    os.environ.update({"WANDB_SILENT": "true"})
+    try:
+        train_serial(cfg, 2 * 256, tmp_path / "run")
+    finally:
+        os.environ.pop("WANDB_SILENT", None)
+    logs = list((tmp_path / "run" / "wandb").glob("offline-run-*/run-*.wandb"))
+    assert len(logs) == 1
+    wandb = Path(sys.executable).with_name("wandb")
+    out = subprocess.run([str(wandb), "leet", "inspect", str(logs[0]), "--json"], env=env,
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    history = [json.loads(line)["history"] for line in out.stdout.splitlines()
+               if '"type":"history"' in line]  # fmt: skip
+    steps = [h["step"]["num"] for h in history]
+    assert steps == [256, 512]
+    rows = [json.loads(r) for r in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
+    assert history[-1]["item"]["episodes/mean_return"] == pytest.approx(rows[-1]["mean_return"])
+    # the V̄ map at the checkpoint, an image W&B keeps as a file of the run
+    assert history[-1]["item"]["curriculum/marginal_value._type"] == "image-file"
+    assert (
+        logs[0].parent / "files" / history[-1]["item"]["curriculum/marginal_value.path"]
+    ).exists()
