@@ -698,26 +698,7 @@ class ExperimentConfig(Section):
     @model_validator(mode="before")
     @classmethod
     def _inline_measures(cls, data: Any) -> Any:
-        """`task: {name: {measure: ..., range: [lo, hi], ...}}`: the range stays in `task`, the
-        measure goes to `env.skill.measures`."""
-        if not isinstance(data, dict) or not isinstance(data.get("task"), dict):
-            return data
-        inline = {k: v for k, v in data["task"].items() if isinstance(v, dict)}
-        if not inline:
-            return data
-        data = dict(data)
-        data["task"] = dict(data["task"])
-        env = dict(data.get("env") or {})
-        skill = dict(env.get("skill") or {})
-        measures = dict(skill.get("measures") or {})
-        for name, spec in inline.items():
-            spec = dict(spec)
-            if "range" not in spec:
-                raise ValueError(f"task.{name}: a declared parameter needs a range: [min, max]")
-            data["task"][name] = spec.pop("range")
-            measures[name] = spec
-        data["env"] = env | {"skill": skill | {"measures": measures}}
-        return data
+        return inline_measures(data)
 
     @field_validator("character")
     @classmethod
@@ -902,6 +883,29 @@ class ExperimentConfig(Section):
         if data["recipe"] not in PRESETS:
             return data  # the field's own error names the known recipes
         return apply(data)
+
+
+def inline_measures(data: Any) -> Any:
+    """`task: {name: {measure: ..., range: [lo, hi], ...}}`: the range stays in `task`, the
+    measure goes to `env.skill.measures` (a config as written, before validation)."""
+    if not isinstance(data, dict) or not isinstance(data.get("task"), dict):
+        return data
+    inline = {k: v for k, v in data["task"].items() if isinstance(v, dict)}
+    if not inline:
+        return data
+    data = dict(data)
+    data["task"] = dict(data["task"])
+    env = dict(data.get("env") or {})
+    skill = dict(env.get("skill") or {})
+    measures = dict(skill.get("measures") or {})
+    for name, spec in inline.items():
+        spec = dict(spec)
+        if "range" not in spec:
+            raise ValueError(f"task.{name}: a declared parameter needs a range: [min, max]")
+        data["task"][name] = spec.pop("range")
+        measures[name] = spec
+    data["env"] = env | {"skill": skill | {"measures": measures}}
+    return data
 
 
 class ConfigError(ValueError):

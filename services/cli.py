@@ -539,7 +539,7 @@ def config_show(
     import yaml
     from rich.table import Table
 
-    from paramimic.config import ExperimentConfig, field_descriptions, raw_config
+    from paramimic.config import ExperimentConfig, field_descriptions, inline_measures, raw_config
     from paramimic.recipes import flatten, sources
 
     overrides = {}
@@ -554,7 +554,7 @@ def config_show(
     except ConfigError as e:
         _fail(str(e))
     fields = flatten(cfg.model_dump(mode="json", exclude={"env": {"clip_texts"}}))
-    where = sources(raw, fields, field_descriptions(ExperimentConfig))
+    where = sources(inline_measures(raw), fields, field_descriptions(ExperimentConfig))
     table = Table("field", "value", "source", title=f"{config} (recipe: {cfg.recipe})")
     for key, value in fields.items():
         if departures and where[key].startswith("default"):
