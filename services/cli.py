@@ -624,6 +624,9 @@ def clip_import(
         float | None, typer.Option(help="metres per file unit (default: from the legs)")
     ] = None,
     up: Annotated[str, typer.Option(help="the file's up axis: auto, +y, +z, ...")] = "auto",
+    forward: Annotated[
+        str, typer.Option(help="the way the skeleton faces at rest: auto, +z, -x, ...")
+    ] = "auto",
     mirror: Annotated[bool, typer.Option(help="swap left and right")] = False,
     loop: Annotated[
         bool, typer.Option(help="find the best gait cycle in what is kept and close it into a loop")
@@ -635,7 +638,9 @@ def clip_import(
     from paramimic.characters.bvh_import import import_bvh
 
     try:
-        imported = import_bvh(bvh, skeleton, start, end, fps, scale, up, mirror, loop)
+        imported = import_bvh(
+            bvh, skeleton, start, end, fps, scale, up, mirror, loop, forward=forward
+        )
         text = imported.text("wrap" if loop else "none")
         imported.clip(out.stem, "wrap" if loop else "none")  # it reads back as env.clip does
     except (ValueError, KeyError) as e:
@@ -644,7 +649,8 @@ def clip_import(
     out.write_text(text)
     report = imported.report
     console.print(f"skeleton map {report['skeleton']!r}: {report['why']}")
-    console.print(f"up axis {report['up_axis']}; {report['metres_per_unit']:.4g} m per unit "
+    console.print(f"up axis {report['up_axis']}, facing {report['forward_axis']} at rest; "
+                  f"{report['metres_per_unit']:.4g} m per unit "
                   f"({report['units_guess']})")  # fmt: skip
     console.print(f"{report['frames']} frames, {report['seconds']:.2f} s at {fps:g} fps; "
                   f"lowest foot point {report['lowest_foot_min_m']:+.3f} m; feet on the "

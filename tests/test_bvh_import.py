@@ -241,3 +241,19 @@ def test_a_clip_renders_beside_its_source_skeleton(tmp_path):
     alone = render("humanoid_walk", tmp_path / "walk.gif")
     assert len(with_source) == 7 and with_source[0].shape[:2] == (240, 320)
     assert red(with_source[3]) > 20 and red(alone[3]) == 0
+
+
+def test_the_rest_forward_is_detected_and_can_be_given(cmu):
+    detected = cmu.report["forward_axis"]
+    assert detected[0] in "+-" and detected[-1] in "xz"  # horizontal in the Y-up CMU file
+    np.testing.assert_array_equal(import_bvh(CMU_FILE, forward=detected).frames, cmu.frames)
+    # said to face another way: the joints whose twist no bone shows (neck, ankles) turn with it,
+    # the hips and knees the bones carry do not
+    turned = import_bvh(CMU_FILE, forward="+x" if detected[-1] == "z" else "+z")
+    leaves = np.r_[12:16, 21:25, 35:39]
+    assert np.abs(turned.frames[:, leaves] - cmu.frames[:, leaves]).max() > 0.1
+    np.testing.assert_allclose(turned.frames[:, 16:21], cmu.frames[:, 16:21], atol=1e-9)
+    with pytest.raises(ValueError, match="along the up axis"):
+        import_bvh(CMU_FILE, forward="-y")
+    with pytest.raises(ValueError, match="--forward 'north'"):
+        import_bvh(CMU_FILE, forward="north")

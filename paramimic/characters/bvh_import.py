@@ -241,18 +241,18 @@ def import_bvh(
     mirror: bool = False,
     loop: bool = False,
     ground: bool = True,
+    forward: str = "auto",
 ) -> Imported:
     """Read a BVH file and retarget it onto the humanoid (see the module's docstring).
     `scale`: metres per file unit (default: the humanoid's leg length over the source's);
     `up`: the file's up axis ('+y', '+z', ...; auto: pybvh's detection); `start`/`end`: the
     seconds kept; `mirror`: left and right swapped; `loop`: the best gait cycle in what is
-    kept, closed into a loop (`close_cycle`); `ground`: the feet moved onto the floor."""
+    kept, closed into a loop (`close_cycle`); `ground`: the feet moved onto the floor;
+    `forward`: the direction the skeleton faces in its rest pose, in the file's axes ('+z',
+    '-x', ...; auto: pybvh's detection from the rest pose), what the neck and ankles turn from."""
     import pybvh
 
-    if up != "auto":
-        if up.lstrip("+-") not in ("x", "y", "z") or len(up) > 2:
-            raise ValueError(f"--up {up!r}: auto, or an axis such as +y, -z, x")
-        up = up if up[0] in "+-" else "+" + up
+    up, forward = _axis("--up", up), _axis("--forward", forward)
     try:
         bvh = pybvh.read_bvh_file(str(path), world_up="+y" if up == "auto" else up,
                                   warn_on_world_up_disagreement=False)  # fmt: skip
@@ -290,6 +290,10 @@ def import_bvh(
         axis = int(np.argmax(np.abs(head - feet)))
         up = ("+" if head[axis] > feet[axis] else "-") + "xyz"[axis]
     bvh.world_up = up
+    if forward == "auto":
+        forward = bvh.rest_forward
+    if forward[-1] == up[-1]:
+        raise ValueError(f"--forward {forward}: along the up axis {up}; give a horizontal axis")
     to_y_up = _to_y_up(up)
     positions, rest = positions @ to_y_up.T, rest @ to_y_up.T
     P = {role: positions[:, index[name]] for role, name in chosen.joints.items()}
@@ -297,7 +301,7 @@ def import_bvh(
     leg = np.mean([np.linalg.norm(R0[f"{s}_knee"] - R0[f"{s}_thigh"]) +
                    np.linalg.norm(R0[f"{s}_ankle"] - R0[f"{s}_knee"]) for s in SIDES])  # fmt: skip
     metres = BASE_LEG / leg if scale is None else scale
-    leaves = _leaf_frames(bvh, chosen, first, last, fps, to_y_up, len(positions))
+    leaves = _leaf_frames(bvh, chosen, first, last, fps, to_y_up, len(positions), forward)
     frames, flipped = _humanoid_frames(P, R0, metres, leaves)
     n = len(frames)
     frames[:, 0] = 1.0 / fps
@@ -329,6 +333,7 @@ def import_bvh(
         "frames": len(frames),
         "seconds": (len(frames) - 1) / fps,
         "up_axis": up,
+        "forward_axis": forward,
         "metres_per_unit": float(metres),
         "units_guess": _units(metres),
         # the knees and elbows are 1-DOF: the angle (deg) between the source's lower bone and
@@ -430,11 +435,22 @@ def _units(metres_per_unit: float) -> str:
 LEAVES = ("neck", "right_ankle", "left_ankle")  # their twist is no bone's direction
 
 
-def _leaf_frames(bvh, chosen: SkeletonMap, first: int, last: int, fps: float, to_y_up, n: int):
+def _axis(option: str, value: str) -> str:
+    """'auto', or an axis as '+x' / '-z' ('y' is '+y')."""
+    if value == "auto":
+        return value
+    if value.lstrip("+-") not in ("x", "y", "z") or len(value) > 2:
+        raise ValueError(f"{option} {value!r}: auto, or an axis such as +y, -z, x")
+    return value if value[0] in "+-" else "+" + value
+
+
+def _leaf_frames(
+    bvh, chosen: SkeletonMap, first: int, last: int, fps: float, to_y_up, n: int, forward: str
+):
     """World frames [n, 3, 3] of the joints whose own twist positions cannot show (the neck
     about the head's axis, the ankle about the foot's): the source joint's rotation from its
     rest pose, which BVH defines as all angles zero, applied to the humanoid's rest frame
-    facing the source's rest forward (pybvh's `rest_forward`), resampled by slerp."""
+    facing the source's rest `forward` (an axis of the file, '+z'), resampled by slerp."""
     from scipy.spatial.transform import Slerp
 
     names = list(bvh.joint_names)
@@ -451,10 +467,9 @@ def _leaf_frames(bvh, chosen: SkeletonMap, first: int, last: int, fps: float, to
             world[name] = local[name] if up is None else world_of(up) * local[name]
         return world[name]
 
-    forward = np.zeros(3)
-    axis = "xyz".index(bvh.rest_forward[-1])
-    forward[axis] = -1.0 if bvh.rest_forward.startswith("-") else 1.0
-    forward = to_y_up @ forward
+    facing = np.zeros(3)
+    facing["xyz".index(forward[-1])] = -1.0 if forward.startswith("-") else 1.0
+    forward = to_y_up @ facing
     forward = _unit(np.array([forward[0], 0.0, forward[2]]))
     rest = _frame(forward, np.array([0.0, 1.0, 0.0]), np.cross(forward, [0.0, 1.0, 0.0]))
     times = np.arange(last - first) / float(bvh.fps)
