@@ -652,6 +652,11 @@ def clip_import(
     console.print(f"up axis {report['up_axis']}, facing {report['forward_axis']} at rest; "
                   f"{report['metres_per_unit']:.4g} m per unit "
                   f"({report['units_guess']})")  # fmt: skip
+    dropped = report["dropped"]
+    console.print(f"{len(dropped)} joints of the file not used: {', '.join(dropped) or 'none'}")
+    errors = ", ".join(f"{k} {m:.1f} deg (max {x:.1f})"
+                       for k, (m, x) in report["hinge_error_deg"].items())  # fmt: skip
+    console.print(f"1-DOF knees and elbows, the lower bone's angle off its hinge: {errors}")
     console.print(f"{report['frames']} frames, {report['seconds']:.2f} s at {fps:g} fps; "
                   f"lowest foot point {report['lowest_foot_min_m']:+.3f} m; feet on the "
                   f"ground in {100 * report['contact_share']:.0f} % of the frames")  # fmt: skip

@@ -145,6 +145,9 @@ def test_paramimic_clip_import_writes_a_clip_that_trains(tmp_path):
     )  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     assert "skeleton map 'cmu'" in res.stdout and out.is_file()
+    said = " ".join(res.stdout.split())  # rich wraps long lines
+    assert "12 joints of the file not used" in said and "LFingers" in said  # what it dropped
+    assert "left_knee 0.0 deg" in said  # the fit errors of the 1-DOF joints
     clip = registration("humanoid").load_clip(str(out))
     assert clip.duration == pytest.approx(3.0, abs=0.04) and clip.loop == "none"
     env = SkillEnv("humanoid", {}, {"clip": str(out)})

@@ -344,6 +344,9 @@ def import_bvh(
         # the lowest foot point over the clip: 0 on the frames the source stands, never far
         # below the floor between them
         "lowest_foot_min_m": float(lowest.min()),
+        # the file's joints no role reads (fingers, toes past the toe, extra spine joints);
+        # end sites are not joints
+        "dropped": [n for n in bvh.joint_names if n not in set(chosen.joints.values())],
         "contact_share": float(contacts.mean()),
         "cycle": cycle,
     }
