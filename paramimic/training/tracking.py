@@ -122,7 +122,7 @@ class TensorBoardLog:
 
     def log(self, row: Mapping, summary: CurriculumSummary | None = None, figure=None) -> None:
         """A metrics row's and the summary's scalars at the row's env steps, and a figure (the
-        V̄ map) if given (closed here)."""
+        V̄ map) if given."""
         step, values = int(row["env_steps"]), scalars(row, summary)
 
         def write() -> None:
@@ -132,7 +132,6 @@ class TensorBoardLog:
                 self.writer.add_figure("curriculum/marginal_value", figure, step)
 
         self._guard(write)
-        _close(figure)
 
     def close(self) -> None:
         if self.writer is not None:
@@ -165,13 +164,12 @@ class WandbLog:
         if figure is not None:
             values["curriculum/marginal_value"] = self.wandb.Image(figure)
         self.run.log(values, step=int(row["env_steps"]))
-        _close(figure)
 
     def close(self) -> None:
         self.run.finish()
 
 
-def _close(figure) -> None:
+def close_figure(figure) -> None:
     if figure is not None:
         import matplotlib.pyplot as plt
 

@@ -38,7 +38,12 @@ from paramimic.task_space import TaskSpace
 from paramimic.training import checkpoint
 from paramimic.training.curriculum import Curriculum, WideningCurriculum
 from paramimic.training.method import Method, method_for
-from paramimic.training.tracking import TensorBoardLog, WandbLog, marginal_figure
+from paramimic.training.tracking import (
+    TensorBoardLog,
+    WandbLog,
+    close_figure,
+    marginal_figure,
+)
 
 
 class StopRequested(Exception):
@@ -317,12 +322,16 @@ class Trainer:
             boards.append(WandbLog(self.run_dir, name, t.wandb, t.wandb_project, config))
         return boards
 
-    def _board(self, board: TensorBoardLog | WandbLog, row: dict) -> None:
+    def _to_boards(self, boards: list, row: dict) -> None:
         """A metrics row, the curriculum's summary and, every checkpoint interval, the V̄ map."""
-        fig = None
+        if not boards:
+            return
+        summary, fig = self.curriculum.summary(), None
         if self.progress.iteration % self.cfg.train.checkpoint_every == 0:
             fig = marginal_figure(self.space, self.cfg.display_dims(), self.marginal.predict)
-        board.log(row, self.curriculum.summary(), fig)
+        for board in boards:
+            board.log(row, summary, fig)
+        close_figure(fig)
 
     def _metrics_log(self) -> MetricsLog:
         """metrics.jsonl to append to, without the rows of iterations this run's state never
@@ -400,8 +409,7 @@ class Trainer:
                     break
                 check_write()
                 log.write(json.dumps(m) + "\n")
-                for board in boards:
-                    self._board(board, m)
+                self._to_boards(boards, m)
                 if on_metrics:
                     on_metrics(m)
                 if self.bad_updates >= self.cfg.train.max_bad_updates:
