@@ -10,7 +10,8 @@ each body as the limb's inertia is (a ∝ I, the volume-scaled value) would keep
 factor at every size. Per body: the median and largest factor over its hinges, the base
 body's factor for the same hinges, and the hinges whose armature exceeds their own inertia.
 
-    python benchmarks/armature.py     # -> benchmarks/results/armature.json, docs/reproduce.md
+    python benchmarks/armature.py
+        # -> benchmarks/results/armature/armature.json, docs/reproduce.md
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from paramimic import characters
 from paramimic.envs.core import compiled_body
 
 ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "benchmarks" / "results" / "armature.json"
+OUT = ROOT / "benchmarks" / "results" / "armature" / "armature.json"
 DOCS = ROOT / "docs" / "reproduce.md"
 MARKS = ("<!-- armature -->", "<!-- /armature -->")
 

@@ -5,7 +5,7 @@ Run it alone on the machine.
 
     python benchmarks/bvh_import.py [--minutes 10]
 
-Writes benchmarks/results/bvh_import.json.
+Writes benchmarks/results/bvh_import/bvh_import.json.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from paramimic.characters.bvh_import import import_bvh
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE = ROOT.parent / "shared" / "motions" / "bvh" / "cmu_131_01_walk.bvh"
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "bvh_import"
 
 
 def long_file(minutes: float, folder: Path) -> tuple[Path, int]:

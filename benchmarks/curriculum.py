@@ -8,11 +8,12 @@ whose elite density is at least D = 0.8, on 2,048 fixed probe points).
     python benchmarks/curriculum.py [--steps 400000] [--seeds 0] [--jobs 2]
         [--config configs/walker_jump.yaml]
 
-Writes benchmarks/results/curriculum.json (per run: N, ER, elites, phase per iteration; the ER
-of each run at common N; the ratio curriculum / uniform) and benchmarks/results/curriculum.png.
+Writes benchmarks/results/curriculum/curriculum.json (per run: N, ER, elites, phase per iteration;
+the ER of each run at common N; the ratio curriculum / uniform) and
+benchmarks/results/curriculum/curriculum.png.
 Each run is the serial backend in its own process; --jobs runs that many at once (default 2,
 one per core: the learner uses one torch thread). Each finished run is kept in
-benchmarks/results/curriculum_runs/<sampling>_s<seed>_<steps>.json and not run again, so seeds
+benchmarks/results/curriculum/runs/<sampling>_s<seed>_<steps>.json and not run again, so seeds
 can be added later (`--seeds 0,1,2` reruns only the missing ones) and the comparison covers them.
 """
 
@@ -28,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "curriculum"
 
 
 def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dict:
@@ -185,7 +186,7 @@ def main() -> None:
         return
     seeds = [int(s) for s in args.seeds.split(",")]
     samplings = args.samplings.split(",")
-    kept = RESULTS / "curriculum_runs"
+    kept = RESULTS / "runs"
     kept.mkdir(parents=True, exist_ok=True)
 
     def kept_path(sampling: str, seed: int) -> Path:

@@ -5,7 +5,7 @@ identical (same contacts); the difference is ParamEnv's own cost: reference look
 reward, observation, termination and info. Reported for each shipped character, plus
 ParamEnv with episode resets (which rebuild the body for a new shape) for a task space with
 shape parameters (each reset fits the new body to the ground, [WL19] Eq. 1). Target: ParamEnv
->= 0.85x raw. Writes benchmarks/results/env_speed.json.
+>= 0.85x raw. Writes benchmarks/results/env_speed/env_speed.json.
 
     python benchmarks/env_speed.py [--steps 3000] [--repeats 5]
 """
@@ -103,7 +103,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results/env_speed.json")
+    ap.add_argument(
+        "--out", type=Path, default=Path(__file__).parent / "results/env_speed/env_speed.json"
+    )
     args = ap.parse_args()
     results = {name: measure(c, t, args.steps, args.repeats) for name, (c, t) in CASES.items()}
     results["walker_legs_with_resets"] = with_resets(args.steps)

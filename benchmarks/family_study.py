@@ -8,7 +8,8 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
 
     python benchmarks/family_study.py run std_frozen --seed 0 --steps 2000000
     python benchmarks/family_study.py queue std_frozen,kl_adaptive --seeds 0 --steps 2000000
-    python benchmarks/family_study.py merge   # the table and benchmarks/results/study_curves.png
+    python benchmarks/family_study.py merge
+        # the table and benchmarks/results/family_study/study_curves.png
     python benchmarks/family_study.py probe base_legs --seed 0   # a run's controller on the family
     python benchmarks/family_study.py fragility biped_base_heading0.8_std0.1  # base -> family
     python benchmarks/family_study.py sensitivity biped_base_heading0.8_std0.1  # one part at a time
@@ -17,8 +18,8 @@ checkpoint (runs/study/<variant>_s<seed>), so an interrupted study loses at most
     python benchmarks/family_study.py headings biped_base --seed 0   # where a 3D body turned
     python benchmarks/family_study.py stopped k0 --seed 0   # a stopped screen's training curve
 
-Each run writes benchmarks/results/study_<variant>_s<seed>_<M>M.json (evaluation, config,
-the training curve); `merge` writes study.json: per variant and budget, mean and spread over
+Each run writes benchmarks/results/family_study/study_<variant>_s<seed>_<M>M.json (evaluation,
+config, the training curve); `merge` writes study.json: per variant and budget, mean and spread over
 seeds of falls, mean return, worst-decile return, forward speed and the final policy std.
 """
 
@@ -37,7 +38,7 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "family_study"
 RUNS = ROOT / "runs" / "study"
 EVAL_SEED = 2024  # never a training seed
 EVAL_EPISODES = 300
@@ -269,8 +270,9 @@ CONTROLLER_KINDS = ("fragility", "rim", "sensitivity")
 def _controller_report(
     kind: str, variant: str, seed: int, state: dict, episodes: int, rows: dict
 ) -> dict:
-    """benchmarks/results/study_<kind>_<variant>_s<seed>_<M>M.json (M: the checkpoint's env
-    steps) of a run's controller measured on other bodies, `episodes` per body or family."""
+    """benchmarks/results/family_study/study_<kind>_<variant>_s<seed>_<M>M.json (M: the
+    checkpoint's env steps) of a run's controller measured on other bodies, `episodes` per body or
+    family."""
     assert kind in CONTROLLER_KINDS, kind
     steps = int(state["progress"]["env_steps"])
     report = {"variant": variant, "seed": seed, "config": variant_config(variant, seed)[0],
@@ -332,8 +334,8 @@ def sensitivity(variant: str, seed: int, episodes: int = 10) -> dict:
 
 def stopped(variant: str, seed: int) -> dict:
     """A run stopped before its budget and not evaluated (a screen that lost): its training
-    curve as it stands, benchmarks/results/study_<variant>_s<seed>_stopped.json, for the
-    record and the curves figure. (`run` continues it and writes the evaluated report.)"""
+    curve as it stands, benchmarks/results/family_study/study_<variant>_s<seed>_stopped.json, for
+    the record and the curves figure. (`run` continues it and writes the evaluated report.)"""
     run_dir = RUNS / f"{variant}_s{seed}"
     curve = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
     tail = curve[-10:]

@@ -26,8 +26,8 @@ still alive 30 s later; Ray's processes included).
 
     python benchmarks/faults.py [--faults actor,sampler,...] [--times 3] [--seed 0]
 
-Writes benchmarks/results/faults.json and its table into docs/security.md. The job is an [L21]
-skill run on the planar walker (configs/walker_jump.yaml, 2 actors x 4 envs, 1,024 steps per
+Writes benchmarks/results/faults/faults.json and its table into docs/security.md. The job is an
+[L21] skill run on the planar walker (configs/walker_jump.yaml, 2 actors x 4 envs, 1,024 steps per
 iteration, so that there are elites to lose), fragment timeout 10 s.
 """
 
@@ -63,7 +63,7 @@ from services.keys import RunKeys
 from services.launch.redis_server import EmbeddedRedis, redis_server_binary
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "faults"
 
 FAULTS = ("none", "actor", "sampler", "redis", "api", "learner", "actor_stop", "disk_full",
           "corrupt")  # fmt: skip

@@ -2,7 +2,7 @@
 
 For each config, N resets with the fit on and off: milliseconds per reset, the share of fits that
 fell back to the vertical lift, and the mean Eq. 1 objective of fit vs lift. Writes
-benchmarks/results/ground_fit.json.
+benchmarks/results/ground_fit/ground_fit.json.
 
     python benchmarks/ground_fit.py [--resets 100]
 """
@@ -60,7 +60,7 @@ def main() -> None:
     ap.add_argument("--resets", type=int, default=100)
     args = ap.parse_args()
     report = {name: measure(name, args.resets) for name in CONFIGS}
-    path = ROOT / "benchmarks" / "results" / "ground_fit.json"
+    path = ROOT / "benchmarks" / "results" / "ground_fit" / "ground_fit.json"
     path.write_text(json.dumps(report, indent=2))
     print(json.dumps(report, indent=2))
 

@@ -36,9 +36,9 @@ seconds it stays up and its body error are the graded measures):
     python benchmarks/humanoid.py screen --config configs/humanoid_walk.yaml \
         --set ppo.hidden_sizes=[256,256] --set ppo.num_epochs=5 --budget 1200 --seed 0
 
-Writes benchmarks/results/<config>_s<train seed>_<k steps>k.json and, with `table`,
-benchmarks/results/humanoid.json (every evaluation of every seed, the latest per seed judged)
-and the results table of docs/humanoid.md (between its `<!-- results -->` markers).
+Writes benchmarks/results/humanoid/<config>_s<train seed>_<k steps>k.json and, with `table`,
+benchmarks/results/humanoid/humanoid.json (every evaluation of every seed, the latest per seed
+judged) and the results table of docs/humanoid.md (between its `<!-- results -->` markers).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ import numpy as np
 from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "humanoid"
 
 DOCS = ROOT / "docs" / "humanoid.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
@@ -59,7 +59,7 @@ SCREEN_MARK = ("<!-- screens -->", "<!-- /screens -->")
 SPEED_MARK = ("<!-- speed -->", "<!-- /speed -->")
 SKILL_MARK = ("<!-- skills -->", "<!-- /skills -->")
 PRECISION_MARK = ("<!-- precision -->", "<!-- /precision -->")
-SCREENS = RESULTS / "humanoid_screens"
+SCREENS = RESULTS / "screens"
 SCREEN_KEYS = ("mean_length_seconds", "fall_percent", "mean_body_error")
 
 # clip -> (no-fall share, body error m, |speed ratio - 1|, env steps): docs/humanoid.md
@@ -396,7 +396,7 @@ def _skills_table(skills: dict) -> str:
 def _speed_table() -> str:
     """The humanoid's training speed against its targets, from benchmarks/throughput.py's JSON
     (one run, side by side)."""
-    path = RESULTS / "throughput.json"
+    path = RESULTS.parent / "throughput" / "throughput.json"
     peer = (
         json.loads(path.read_text())["peers"].get("configs/humanoid_walk.yaml")
         if path.exists()

@@ -19,8 +19,8 @@ PNG). Each body's forward speed is compared with its own target speed, the clip'
     python benchmarks/humanoid_families.py eval RUN_DIR [--bodies 300] [--seed 2025]
     python benchmarks/humanoid_families.py table
 
-Writes benchmarks/results/humanoid_family_<config>_s<seed>_<k steps>k.json and its heatmap
-PNG beside it; `table` writes the results section of docs/humanoid_families.md.
+Writes benchmarks/results/humanoid_families/humanoid_family_<config>_s<seed>_<k steps>k.json and
+its heatmap PNG beside it; `table` writes the results section of docs/humanoid_families.md.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from paramimic.training import checkpoint
 from services.media import write_heatmap
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "humanoid_families"
 DOCS = ROOT / "docs" / "humanoid_families.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
 EVAL_SEED = 2025  # never a training seed
@@ -131,6 +131,7 @@ def main() -> None:
         print(table())
         return
     r = evaluate_family(args.run, args.bodies, args.seed)
+    RESULTS.mkdir(parents=True, exist_ok=True)
     stem = f"humanoid_family_{r['config']}_s{r['train_seed']}_{r['env_steps'] // 1000}k"
     (RESULTS / f"{stem}.json").write_text(json.dumps(r, indent=2))
     grid = r["report"].get("grid")

@@ -1,7 +1,7 @@
 """Learning quality: paramimic PPO vs Stable-Baselines3 PPO, and adaptive sampling k=0 vs k=10.
 
-Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs them for every
---seeds, two at a time, and merges them into benchmarks/results/learning.json):
+Stages (each writes benchmarks/results/learning/learning_<stage>_s<seed>.json; `all` runs them for
+every --seeds, two at a time, and merges them into benchmarks/results/learning/learning.json):
 - `ours_base`: train configs/walker_base.yaml for --steps, evaluate 300 episodes.
 - `sb3_base`: SB3 PPO on the same gymnasium env (paramimic/Walker-v0, same env section) for the
   same steps, with the same PPO hyperparameters (γ, λ, clip, lr, 4096 steps/update as 16 envs x
@@ -19,7 +19,7 @@ Stages (each writes benchmarks/results/learning_<stage>_s<seed>.json; `all` runs
 
 `targets` reads the result files behind each of the family targets (walker_legs within 5M, adaptive
 vs uniform, biped_lower and quadruped at x0.5 ranges, the base biped at 2M, [L21] walker_jump's
-explored ratio, `make train`'s end) and writes benchmarks/results/targets.json: per row the
+explored ratio, `make train`'s end) and writes benchmarks/results/learning/targets.json: per row the
 target, the measurement, the seeds it rests on, met or missed, and the command that makes it.
 With --run, the commands of rows whose results are missing run first (resumable; long).
 """
@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "learning"
 STAGES = ("ours_base", "sb3_base", "legs_k0", "legs_k10")
 RAY_STAGES = ("ray_sync_base", "ray_pipelined_base")  # 2 actors x 8 envs on a local Ray
 EVAL_EPISODES = int(__import__("os").environ.get("EVAL_EPISODES", 300))
@@ -296,7 +296,7 @@ WALKING = 0.8  # m/s, the x0.5 rows' speed bar: walker_legs' (its target 1.0 m/s
 def _study(variant: str, millions: int, seeds=(0, 1, 2)) -> list[dict]:
     runs = []
     for seed in seeds:
-        path = RESULTS / f"study_{variant}_s{seed}_{millions}M.json"
+        path = RESULTS.parent / "family_study" / f"study_{variant}_s{seed}_{millions}M.json"
         if path.exists():
             runs.append(json.loads(path.read_text()))
     return runs
@@ -361,7 +361,7 @@ def targets() -> list[dict]:
         {"target": "the base biped_lower walking: <= 10 % falls within 2M steps"}
         | _falls_row(BIPED_BASE, 2, 10.0)
     )
-    path = RESULTS / "curriculum.json"
+    path = RESULTS.parent / "curriculum" / "curriculum.json"
     er = json.loads(path.read_text()) if path.exists() else {}
     comparison = er.get("comparison", {})
     rows.append({
@@ -372,7 +372,7 @@ def targets() -> list[dict]:
         "met": bool(comparison.get("target_met")) and len(er.get("seeds", [])) >= 3,
         "command": "python benchmarks/curriculum.py --steps 1500000 --seeds 0,1,2 --jobs 2",
     })  # fmt: skip
-    path = RESULTS / "make_train_metrics.jsonl"
+    path = RESULTS.parent / "make_train" / "make_train_metrics.jsonl"
     last = json.loads(path.read_text().splitlines()[-1]) if path.exists() else {}
     tail = [json.loads(x) for x in path.read_text().splitlines()[-10:]] if path.exists() else []
     end = float(np.mean([x["fall_percent"] for x in tail])) if tail else None
@@ -381,7 +381,8 @@ def targets() -> list[dict]:
                   "the end (training episodes, mean of the last 10 iterations)",
         "seeds": [0], "measured": {"fall_percent_end": end, "env_steps": last.get("env_steps")},
         "met": end is not None and end <= 20.0,
-        "command": "make train  (metrics kept as benchmarks/results/make_train_metrics.jsonl)",
+        "command": "make train  (metrics kept as "
+                   "benchmarks/results/make_train/make_train_metrics.jsonl)",
     })  # fmt: skip
     return rows
 

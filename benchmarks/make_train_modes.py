@@ -8,7 +8,8 @@ wall time, steps/s, training falls (first 25 / last 10 iterations) and the held-
 and return.
 
     python benchmarks/make_train_modes.py run --mode pipelined --seed 1
-    python benchmarks/make_train_modes.py report   # -> benchmarks/results/make_train_modes.json
+    python benchmarks/make_train_modes.py report
+        # -> benchmarks/results/make_train/make_train_modes.json
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "make_train"
 RUNS = ROOT / "runs" / "make_train_modes"
 CONFIG = ROOT / "configs" / "walker_legs.yaml"
 MODES = ("sync", "pipelined")

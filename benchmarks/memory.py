@@ -1,5 +1,6 @@
 """Where a rollout actor's memory goes: resident set size after each import and step of its
-set-up, in one fresh process (/proc/self/status VmRSS). Writes benchmarks/results/memory.json.
+set-up, in one fresh process (/proc/self/status VmRSS). Writes
+benchmarks/results/memory/memory.json.
 
     python benchmarks/memory.py [--config configs/walker_legs.yaml]
 """
@@ -57,7 +58,7 @@ def main() -> None:
 
     mark("torch (the learner only; actors no longer import it)")
     report = {"config": args.config, "rss_mb": steps, "total_mb": rss_mb()}
-    out = ROOT / "benchmarks" / "results" / "memory.json"
+    out = ROOT / "benchmarks" / "results" / "memory" / "memory.json"
     out.write_text(json.dumps(report, indent=2))
     print(json.dumps(report, indent=2))
 

@@ -5,9 +5,9 @@ its [WL19] §5.3 range, target speed 1 m/s, adaptive shape sampling), train with
 for --steps each (serial, the same seed), then evaluate each controller on 300 random shapes
 with a 30 s horizon: task achievement (mean cumulative task reward, Eq. 6 share of the reward,
 each under its own reward function as in the paper) and fall-down % within 30 s. Also the mean
-forward speed. Runs two trainings at a time (2 cores); writes benchmarks/results/
+forward speed. Runs two trainings at a time (2 cores); writes benchmarks/results/normalization/
 normalization_<character>_<rn|no_rn>_<steps>k_s<seed>[_x<scale>][_ppo-<preset>].json and the
-summary benchmarks/results/normalization.json.
+summary benchmarks/results/normalization/normalization.json.
 
 --shape-scale s < 1 shrinks every shape range toward the base body (lo' = 1 - s(1 - lo),
 hi' = 1 + s(hi - 1)): the paper trains for 50-100M transitions, a laptop for ~1M, and at the
@@ -26,7 +26,8 @@ full ranges nothing learns to stay up in that budget (measured: 92-100 % falls b
 `open-loop` runs the reference motion with zero action (the PD servos track the sinusoidal gait,
 no policy) on random bodies at shape scales 0, 0.25, 0.5 and 1 (30 episodes of the config's
 horizon each), and on bodies where only one segment varies (scale 0.25, 10 episodes per
-segment): fall % and mean episode length, in benchmarks/results/normalization_open_loop.json.
+segment): fall % and mean episode length, in
+benchmarks/results/normalization/normalization_open_loop.json.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "normalization"
 EVAL_EPISODES, EVAL_SEED = 300, 2024  # shapes no training run draws
 
 CHARACTERS = ("biped_lower", "quadruped")

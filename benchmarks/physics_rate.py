@@ -16,7 +16,8 @@ Control stays at 30 Hz ([WL19] Table 2); only `env.physics_hz` (the MuJoCo time 
   (--seeds), evaluated on 300 episodes at the rate it trained at; run one (rate, seed) per
   process, two at a time: `python benchmarks/physics_rate.py learning --rate 300 --seed 0`.
 
-Writes benchmarks/results/physics_rate.json (and physics_rate_learning_<cfg>_<hz>_s<seed>.json).
+Writes benchmarks/results/physics_rate/physics_rate.json (and
+physics_rate_learning_<cfg>_<hz>_s<seed>.json).
 
     python benchmarks/physics_rate.py speed fidelity divergence [--bodies 300]
     python benchmarks/physics_rate.py learning --rate 300 --seed 0 [--budget 300]
@@ -41,7 +42,7 @@ from paramimic.envs.skill_motion import at
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+RESULTS = ROOT / "benchmarks" / "results" / "physics_rate"
 RATES = (600, 300, 210, 150)  # 200 Hz is no multiple of the 30 Hz control: 210 (7 substeps)
 CHARACTERS = ("walker", "biped_lower", "quadruped", "humanoid")
 CONTROL_HZ = 30

@@ -14,7 +14,8 @@ Rows (ROWS below):
 Each row runs in two arms: `paper` (the paper's recipe, `recipe: wl19` or `l21`: every
 departure switched to the paper's setting) and `ours` (the row's config as shipped). A run is
 the serial trainer in its own run directory (runs/reproduce/..., resumed where it stopped),
-evaluated once at its budget; its JSON goes to benchmarks/results/reproduce/.
+evaluated once at its budget; its JSON and the table's (reproduce.json) go to
+benchmarks/results/reproduce/.
 
     python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--steps 2000000]
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
@@ -216,7 +217,7 @@ def table() -> str:
             budget = f"{spec['steps'] / 1e6:.0f}M per run"
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], budget])  # fmt: skip
-    kept = RESULTS / "curriculum_runs"
+    kept = RESULTS / "curriculum" / "runs"
     for sampling in CURRICULA:
         runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
         cell = "not run yet"
@@ -237,7 +238,8 @@ def table() -> str:
         _, tail = rest.split(marks[1], 1)
         text = f"{head}{marks[0]}\n{part}\n{marks[1]}{tail}"
     DOCS.write_text(text)
-    (RESULTS / "reproduce.json").write_text(json.dumps({"rows": rows, "header": header}, indent=1))
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "reproduce.json").write_text(json.dumps({"rows": rows, "header": header}, indent=1))
     return body
 
 

@@ -5,7 +5,8 @@ sees them early on): the median and 90th percentile of the whole reset, and of i
 building the body F(B̄, b) (spec, compile, indices; `body`), binding it to the env (data,
 reference table, reward scales; `bind`) and placing it on the ground ([WL19] Eq. 1; `ground`).
 Also env steps/s with resets on one core, small random actions, episodes of ~1 s (early
-training), against raw `mj_step` of the base model. Writes benchmarks/results/reset_cost.json.
+training), against raw `mj_step` of the base model. Writes
+benchmarks/results/reset_cost/reset_cost.json.
 
     python benchmarks/reset_cost.py [--resets 200] [--configs walker_legs,biped_lower,quadruped]
 """
@@ -100,7 +101,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--resets", type=int, default=200)
     ap.add_argument("--configs", default=",".join(CONFIGS))
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/reset_cost.json")
+    ap.add_argument(
+        "--out", type=Path, default=ROOT / "benchmarks/results/reset_cost/reset_cost.json"
+    )
     args = ap.parse_args()
     report = {name: measure(name, args.resets) for name in args.configs.split(",")}
     report["machine"] = {"processor": platform.processor(), "python": platform.python_version()}

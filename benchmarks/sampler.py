@@ -11,8 +11,8 @@
 
     python benchmarks/sampler.py [--calls 1000] [--seconds 20] [--connections 4,16]
 
-Writes benchmarks/results/sampler.json. Targets: sampler p99 < 5 ms at 10^5; API >= 500 req/s
-with p99 < 50 ms while training.
+Writes benchmarks/results/sampler/sampler.json. Targets: sampler p99 < 5 ms at 10^5; API >= 500
+req/s with p99 < 50 ms while training.
 """
 
 from __future__ import annotations
@@ -231,7 +231,7 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=1000)
     ap.add_argument("--seconds", type=int, default=20)
     ap.add_argument("--connections", default="4,16", help="wrk connections, one load per value")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/sampler.json")
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/sampler/sampler.json")
     args = ap.parse_args()
     result: dict = {"cpus": os.cpu_count(), "config": CONFIG}
     ray.init(address="local", include_dashboard=False, _node_ip_address="127.0.0.1",

@@ -9,7 +9,7 @@ Not a timed test.
 Both with token authentication, a real Redis and the sampler actor, as in training. Measured:
 sampling (the learner's `collect` of a fragment per actor, weights fixed) and end-to-end
 training iterations (sampling + PPO update), env steps/s after a warm-up. Target: the two-node
-overhead <= 10 %. Writes benchmarks/results/scaling.json.
+overhead <= 10 %. Writes benchmarks/results/scaling/scaling.json.
 
     python benchmarks/scaling.py [--config configs/walker_legs.yaml] [--rounds 8]
 """
@@ -69,7 +69,9 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--config", default="configs/walker_legs.yaml")
     p.add_argument("--rounds", type=int, default=8)
-    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "scaling.json"))
+    p.add_argument(
+        "--out", default=str(ROOT / "benchmarks" / "results" / "scaling" / "scaling.json")
+    )
     p.add_argument("--measure", nargs=3, metavar=("ADDRESS", "NODE_IP", "REDIS_URL"),
                    help=argparse.SUPPRESS)  # fmt: skip
     args = p.parse_args()

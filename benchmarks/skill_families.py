@@ -12,8 +12,8 @@ the latest episodes' a' per parameter — next to [L21] Table 1's N and ER for t
         [--steps 300000] [--walker-steps 1000000] [--seed 0] [--jobs 2]
     python benchmarks/skill_families.py --table
 
-Writes benchmarks/results/skill_families.json; each finished run is kept in
-benchmarks/results/skill_families_runs/<family>_s<seed>_<steps>.json and not run again.
+Writes benchmarks/results/skill_families/skill_families.json; each finished run is kept in
+benchmarks/results/skill_families/runs/<family>_s<seed>_<steps>.json and not run again.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import numpy as np
 from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
-RUNS = RESULTS / "skill_families_runs"
+RESULTS = ROOT / "benchmarks" / "results" / "skill_families"
+RUNS = RESULTS / "runs"
 
 # family -> ([L21] Table 1 skill, its episodes N, its ER); None where the paper has no such row
 FAMILIES = {

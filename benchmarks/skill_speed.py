@@ -3,7 +3,7 @@
 Trains a few iterations in-process (`--serial`'s loop) under cProfile and reports training
 steps/s, sampling steps/s, and the shares of the iteration spent in the PPO update, in MuJoCo's
 `mj_step`, in the rest of the envs, in P_θ and in the curriculum, for each --threads setting of
-`train.torch_threads`. Writes benchmarks/results/skill_speed.json.
+`train.torch_threads`. Writes benchmarks/results/skill_speed/skill_speed.json.
 
     python benchmarks/skill_speed.py [--config configs/humanoid_jump.yaml] [--threads 1,2]
 """
@@ -72,7 +72,7 @@ def main() -> None:
         "config": args.config,
         "runs": [measure(args.config, int(t), args.iterations) for t in args.threads.split(",")],
     }
-    out = ROOT / "benchmarks" / "results" / "skill_speed.json"
+    out = ROOT / "benchmarks" / "results" / "skill_speed" / "skill_speed.json"
     out.write_text(json.dumps(report, indent=2))
     print(json.dumps(report, indent=2))
 

@@ -13,7 +13,8 @@
 humanoid_walk, whose resets, shapes and curriculum are included), so the default mode's ratio to
 RLlib is measured side by side in one run; beside each, (a) for that config's body at 600 Hz, so
 that training's rate is also a ratio to the raw single-core physics at [WL19]'s rate.
-Also the peak RSS of an actor and of the learner. Writes benchmarks/results/throughput.json
+Also the peak RSS of an actor and of the learner. Writes
+benchmarks/results/throughput/throughput.json
 and prints a table.
 
     pip install -e ".[bench]"; make rllib-venv; python benchmarks/throughput.py [--iterations 6]
@@ -212,7 +213,9 @@ def main() -> None:
     )
     ap.add_argument("--rllib-python", type=Path, default=ROOT / ".venv-rllib/bin/python")
     ap.add_argument("--rllib-iterations", type=int, default=4)
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/throughput.json")
+    ap.add_argument(
+        "--out", type=Path, default=ROOT / "benchmarks/results/throughput/throughput.json"
+    )
     args = ap.parse_args()
     cfg = load_config(ROOT / args.config, {"actors.num_actors": 2})
     rows: dict[str, dict] = {}

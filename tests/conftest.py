@@ -206,7 +206,7 @@ def browser():
 @pytest.fixture(scope="session")
 def screenshots(tmp_path_factory):
     """Where the browser tests save their screenshots: $PARAMIMIC_SCREENSHOTS (the docs'
-    come from `PARAMIMIC_SCREENSHOTS=benchmarks/results pytest tests/test_dashboard.py
+    come from `PARAMIMIC_SCREENSHOTS=benchmarks/results/screenshots pytest tests/test_dashboard.py
     tests/test_play.py`), else a temp dir, so that `make test` leaves the checkout clean."""
     from pathlib import Path
 
