@@ -57,7 +57,8 @@ test-deps:
 
 test: $(VENV)/.installed-test gl test-deps
 	$(BIN)/ruff check paramimic services tests benchmarks docs/hooks
-	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	# --strict: a broken link, a missing page or a number no benchmark wrote fails the build
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 	$(BIN)/python -m pytest tests --durations=15
 
 # the documentation site at http://127.0.0.1:8001 while you edit docs/

@@ -64,6 +64,11 @@ def pct(value, digits: int = 1) -> str:
     return f"{float(value):.{digits}f} %"
 
 
+def pick(values: list, indices: list[int]) -> list:
+    """The items of `values` at `indices` (e.g. a curve at a few of its points)."""
+    return [values[i] for i in indices]
+
+
 def table(rows: list, headers: list[str]) -> str:
     """A Markdown table."""
     return tabulate(rows, headers=headers, tablefmt="github", disable_numparse=True)
@@ -77,5 +82,5 @@ def source(path: str, command: str) -> str:
 def define_env(env) -> None:
     for fn in (result, results, table, source):
         env.macro(fn)
-    for fn in (num, ratio, pct):
+    for fn in (num, ratio, pct, pick):
         env.filter(fn)
