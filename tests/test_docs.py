@@ -57,7 +57,7 @@ def test_every_results_page_renders_its_numbers_from_the_benchmarks_json():
             continue
         text = page.read_text()
         assert text.startswith("---\nrender_macros: true\n---\n"), page.name
-        cited = re.findall(r'(results?)\("([^"]+)"(, required=false)?', text)
+        cited = re.findall(r'(results?)\("([^"]+)"(, required=false)?\)', text)
         assert cited, f"{page.name} reads no benchmark JSON"
         for kind, path, optional in cited:
             if kind == "result":
