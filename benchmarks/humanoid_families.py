@@ -16,8 +16,13 @@ PNG). Each body's forward speed is compared with its own target speed, the clip'
 | humanoid_fig2b (left x right leg, ±10 %) | <= 5 % | mean within 15 % of the target | 20M |
 | humanoid_fig2c, humanoid_fig2d | measured | measured | |
 
-    python benchmarks/humanoid_families.py eval RUN_DIR [--bodies 300] [--seed 2025]
+    python benchmarks/humanoid_families.py eval RUN_DIR|CHECKPOINT [--bodies 300] [--seed 2025]
+    python benchmarks/humanoid_families.py eval configs/humanoid_fig2b.yaml --base
     python benchmarks/humanoid_families.py table
+
+`--base` judges the family's starting point: its base controller adopted by the family's
+config (`train.init_from`, new task inputs ignored at first) before any family training, the
+row at 0 env steps that says what the family run added.
 
 Writes benchmarks/results/humanoid_families/humanoid_family_<config>_s<seed>_<k steps>k.json and
 its heatmap PNG beside it; `table` writes the results section of docs/humanoid_families.md.
@@ -27,13 +32,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
+from humanoid import training_wall_clock  # benchmarks/humanoid.py, beside this script
 from tabulate import tabulate
 
+from paramimic.config import load_config
 from paramimic.evaluation import SPEED_TOLERANCE, evaluate_config
 from paramimic.training import checkpoint
+from paramimic.training.trainer import Trainer
 from services.media import write_heatmap
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,18 +57,38 @@ TARGETS = {
 }
 
 
-def evaluate_family(run: Path, bodies: int, seed: int) -> dict:
-    state, cfg, policy = checkpoint.load_policy(run)
+def _base_controller(config: Path, run_dir: Path):
+    """(progress, config, policy) of a family config's starting point: the Trainer's warm start
+    from `train.init_from`, no update made."""
+    cfg = load_config(config)
+    if cfg.train.init_from is None:
+        raise SystemExit(f"{config}: --base needs a family warm started (train.init_from)")
+    trainer = Trainer(cfg, run_dir)
+    policy = trainer.learner.policy.eval()
+    return {"env_steps": 0, "iteration": 0}, cfg, policy
+
+
+def evaluate_family(run: Path, bodies: int, seed: int, base: bool = False) -> dict:
+    if base:
+        with tempfile.TemporaryDirectory() as tmp:
+            progress, cfg, policy = _base_controller(run, Path(tmp))
+        wall = 0.0
+    else:
+        state, cfg, policy = checkpoint.load_policy(run)
+        progress = state["progress"]
+        wall = training_wall_clock(run, progress["iteration"])
     if cfg.env.gait is None or not any(hi > lo for lo, hi in cfg.task.values()):
         raise SystemExit(f"{run}: not a humanoid family on a clip gait (env.gait, a task range)")
     report = evaluate_config(policy, cfg, bodies, seed, grid_size=7, seconds=30.0)
-    steps = int(state["progress"]["env_steps"])
+    steps = int(progress["env_steps"])
     out = {
         "config": cfg.name,
         "train_seed": cfg.train.seed,
+        "base_controller": base,
         "eval_seed": seed,
         "env_steps": steps,
-        "iteration": state["progress"]["iteration"],
+        "iteration": progress["iteration"],
+        "training_wall_clock_s": wall,
         "task": {k: list(v) for k, v in cfg.task.items()},
         "report": report,
     }
@@ -78,28 +107,36 @@ def evaluate_family(run: Path, bodies: int, seed: int) -> dict:
 
 def _rows() -> dict[str, list[dict]]:
     rows: dict[str, list[dict]] = {}
-    for path in sorted(RESULTS.glob("humanoid_family_*_s*_*k.json")):
+    for path in sorted(RESULTS.glob("humanoid_family_*k.json")):
         r = json.loads(path.read_text())
         rows.setdefault(r["config"], []).append(r)
     return rows
 
 
 def table() -> str:
-    header = ["family", "seed", "env steps", "bodies", "falls in 30 s", "speed / target",
-              "within 15 %", "body error (m)", "worst decile / mean", "target met"]  # fmt: skip
+    header = ["family", "seed", "env steps", "training wall-clock", "bodies", "falls in 30 s",
+              "speed / target", "within 15 %", "body error (m)", "worst decile / mean",
+              "CV of the per-body return", "target met"]  # fmt: skip
     lines, verdicts = [], []
     for config, runs in sorted(_rows().items()):
         for r in sorted(runs, key=lambda r: (r["train_seed"], r["env_steps"])):
             rep = r["report"]
             met = {True: "yes", False: "no", None: "measured"}[r.get("met")]
+            base = r.get("base_controller")
             lines.append([
-                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M", rep["episodes"],
+                config, "any" if base else r["train_seed"],
+                "0 (the base controller)" if base else f"{r['env_steps'] / 1e6:.2f}M",
+                f"{r.get('training_wall_clock_s', 0) / 60:.0f} min", rep["episodes"],
                 f"{rep['fall_percent']:.1f} %", f"{rep['speed_over_target']:.2f}",
                 f"{100 * rep['on_target_share']:.0f} %", f"{rep['mean_body_error']:.3f}",
-                f"{rep['worst_decile_return'] / rep['mean_return']:.2f}", met,
+                f"{rep['worst_decile_return'] / rep['mean_return']:.2f}",
+                f"{rep['uniformity']['coefficient_of_variation']:.3f}",
+                "" if base else met,
             ])  # fmt: skip
         latest = {}
         for r in runs:
+            if r.get("base_controller"):
+                continue
             if r["env_steps"] >= latest.get(r["train_seed"], {"env_steps": -1})["env_steps"]:
                 latest[r["train_seed"]] = r
         if config in TARGETS:
@@ -125,14 +162,16 @@ def main() -> None:
     e.add_argument("run", type=Path)
     e.add_argument("--bodies", type=int, default=300)
     e.add_argument("--seed", type=int, default=EVAL_SEED)
+    e.add_argument("--base", action="store_true", help="RUN is a family config: judge its start")
     sub.add_parser("table")
     args = ap.parse_args()
     if args.cmd == "table":
         print(table())
         return
-    r = evaluate_family(args.run, args.bodies, args.seed)
+    r = evaluate_family(args.run, args.bodies, args.seed, args.base)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    stem = f"humanoid_family_{r['config']}_s{r['train_seed']}_{r['env_steps'] // 1000}k"
+    seed = "base" if args.base else f"s{r['train_seed']}"
+    stem = f"humanoid_family_{r['config']}_{seed}_{r['env_steps'] // 1000}k"
     (RESULTS / f"{stem}.json").write_text(json.dumps(r, indent=2))
     grid = r["report"].get("grid")
     if grid is not None:
