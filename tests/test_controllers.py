@@ -57,3 +57,24 @@ def test_a_controller_name_must_be_plain():
     with pytest.raises(ValueError, match="letters, digits"):
         controllers.add(controllers.directory(), "../escape")
     assert controllers.find("../escape") is None
+
+
+def test_every_shipped_controller_loads_by_name_and_acts_in_its_own_env():
+    """Each file in the package's controllers folder (the walk, the run, the cartwheel, the CMU
+    walk, the Fig. 2b family...) loads with today's config schema and acts in the env its config
+    builds: a config change that would break `paramimic play NAME` after install fails here."""
+    import numpy as np
+
+    from paramimic.envs import env_for
+
+    names = sorted(p.stem for p in controllers.directory().glob("*.pt"))
+    assert "humanoid_walk" in names and "humanoid_fig2b" in names
+    for name in names:
+        state, cfg, policy = checkpoint.load_policy(name)
+        env = env_for(cfg)
+        obs, _ = env.reset(seed=0)
+        assert obs.shape == (state["obs_dim"],), name
+        actions, _, _ = policy.act(obs[None], None)
+        assert actions.shape == (1, state["act_dim"]), name
+        _, _, terminated, _, _ = env.step(actions[0])
+        assert np.all(np.isfinite(actions)) and not terminated, name
