@@ -321,6 +321,68 @@ def _falls_row(variant: str, millions: int, at_most: float, extra: str = "") -> 
     return row
 
 
+def _humanoid_rows() -> list[dict]:
+    """The humanoid's rows: each clip gait's and one-shot skill's latest evaluation per seed
+    (benchmarks/humanoid.py `table` -> humanoid/humanoid.json) and each body family's
+    (benchmarks/humanoid_families.py, its base-controller rows left out)."""
+    rows = []
+    path = RESULTS.parent / "humanoid" / "humanoid.json"
+    judged = json.loads(path.read_text()) if path.exists() else {}
+    for config, r in sorted(judged.items()):
+        if config in ("screens", "skills"):
+            continue
+        seeds = {int(s): x for s, x in r["seeds"].items()}
+        rows.append({
+            "target": f"{config}: >= 95 % of 30-s episodes without a fall, body error <= 0.06 m, "
+                      "speed within 10 % of the clip's (docs/humanoid.md)",
+            "seeds": sorted(seeds),
+            "measured": {k: [seeds[s][k] for s in sorted(seeds)]
+                         for k in ("fall_percent", "mean_body_error", "speed_ratio", "env_steps")},
+            "met": len(seeds) >= 3 and all(x["met"] for x in seeds.values()),
+            "command": f"paramimic train configs/{config}.yaml --seed N, then "
+                       "python benchmarks/humanoid.py eval RUN_DIR",
+        })  # fmt: skip
+    for config, r in sorted(judged.get("skills", {}).items()):
+        latest = {x["train_seed"]: x for x in sorted(r["runs"], key=lambda x: x["env_steps"])}
+        t = r["target"]
+        rows.append({
+            "target": f"{config}: >= {100 * t['share']:.0f} % of 100 tries succeed "
+                      f"({t['kind']}) within {t['env_steps'] / 1e6:g}M env steps",
+            "seeds": sorted(latest),
+            "measured": {k: [latest[s][k] for s in sorted(latest)]
+                         for k in ("success_share", "mean_body_error", "env_steps")},
+            "met": len(latest) >= 3 and all(x["met"] for x in latest.values()),
+            "command": f"paramimic train configs/{config}.yaml --seed N, then "
+                       "python benchmarks/humanoid.py skill RUN_DIR",
+        })  # fmt: skip
+    families: dict[str, dict[int, dict]] = {}
+    for path in (RESULTS.parent / "humanoid_families").glob("humanoid_family_*_s*_*k.json"):
+        r = json.loads(path.read_text())
+        if "met" in r and not r.get("base_controller"):
+            seeds = families.setdefault(r["config"], {})
+            if r["env_steps"] >= seeds.get(r["train_seed"], {"env_steps": -1})["env_steps"]:
+                seeds[r["train_seed"]] = r
+    for config, seeds in sorted(families.items()):
+        t = next(iter(seeds.values()))["target"]
+        rows.append({
+            "target": f"{config}: <= {t['fall_percent']:g} % falls in 30 s on 300 held-out "
+                      f"bodies, speed within {100 * t['speed_within']:.0f} % of each body's "
+                      f"target, within {t['env_steps'] / 1e6:g}M env steps "
+                      "(docs/humanoid_families.md)",
+            "seeds": sorted(seeds),
+            "measured": {
+                "fall_percent": [seeds[s]["report"]["fall_percent"] for s in sorted(seeds)],
+                "speed_over_target": [seeds[s]["report"]["speed_over_target"]
+                                      for s in sorted(seeds)],
+                "env_steps": [seeds[s]["env_steps"] for s in sorted(seeds)],
+            },
+            "met": len(seeds) >= 3 and all(x["met"] for x in seeds.values()),
+            "command": f"paramimic train configs/{config}.yaml --seed N, then "
+                       "python benchmarks/humanoid_families.py eval RUN_DIR",
+        })  # fmt: skip
+    return rows
+
+
 def targets() -> list[dict]:
     """The family targets' rows from the result files (see the module docstring)."""
     rows = []
@@ -384,7 +446,7 @@ def targets() -> list[dict]:
         "command": "make train  (metrics kept as "
                    "benchmarks/results/make_train/make_train_metrics.jsonl)",
     })  # fmt: skip
-    return rows
+    return rows + _humanoid_rows()
 
 
 def main() -> None:
