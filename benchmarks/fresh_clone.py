@@ -34,17 +34,21 @@ SUMMARY = re.compile(r"=+ (.*?) in ([\d.]+)s")
 
 
 def _timed(cmd: list[str], cwd: Path, log: Path) -> dict:
+    """Wall-clock seconds and return code of a command (a failure keeps its log's last lines)."""
     start = time.monotonic()
     with log.open("w") as out:
         rc = subprocess.run(cmd, cwd=cwd, stdout=out, stderr=subprocess.STDOUT).returncode
-    return {"command": " ".join(cmd), "seconds": time.monotonic() - start, "returncode": rc}
+    done = {"command": " ".join(cmd), "seconds": time.monotonic() - start, "returncode": rc}
+    if rc != 0:
+        done["log_tail"] = log.read_text(errors="replace").splitlines()[-40:]
+    return done
 
 
 def _training(clone: Path, config: str) -> dict:
-    import yaml
+    from paramimic.config import load_config
 
-    name = yaml.safe_load((clone / config).read_text())["name"]
-    lines = (clone / "runs" / name / "metrics.jsonl").read_text().splitlines()
+    run_dir = clone / load_config(clone / config).resolved_run_dir()
+    lines = (run_dir / "metrics.jsonl").read_text().splitlines()
     rows = [r for r in map(json.loads, lines) if "env_steps" in r]
     falls = [r["fall_percent"] for r in rows]
     return {
@@ -54,7 +58,7 @@ def _training(clone: Path, config: str) -> dict:
         "steps_per_second": rows[-1]["env_steps"] / (rows[-1]["time"] - rows[0]["time"]),
         "training_falls_first_25": sum(falls[:25]) / len(falls[:25]),
         "training_falls_last_10": sum(falls[-10:]) / len(falls[-10:]),
-        "metrics": clone / "runs" / name / "metrics.jsonl",
+        "metrics": run_dir / "metrics.jsonl",
     }
 
 
@@ -88,6 +92,10 @@ def main() -> None:
         },  # fmt: skip
     }
     stem = f"fresh_clone_{out['date']}"
+    path = RESULTS / f"{stem}.json"
+    if path.exists():  # `--only train` and `--only test` of one day make one file
+        out = json.loads(path.read_text()) | out
+    RESULTS.mkdir(parents=True, exist_ok=True)
     try:
         if args.only in (None, "train"):
             install = _timed(["make", ".venv/.installed"], clone, tmp / "install.log")
@@ -96,9 +104,9 @@ def main() -> None:
                                  "seconds": install["seconds"] + train["seconds"]}  # fmt: skip
             if train["returncode"] == 0:
                 run = _training(clone, env_config)
-                RESULTS.mkdir(parents=True, exist_ok=True)
                 shutil.copy(run.pop("metrics"), RESULTS / f"{stem}_metrics.jsonl")
                 out["make_train"]["run"] = run | {"metrics": f"{stem}_metrics.jsonl"}
+            path.write_text(json.dumps(out, indent=2))
         if args.only in (None, "test"):
             install = _timed(["make", ".venv/.installed-test"], clone, tmp / "install-test.log")
             test = _timed(["make", "test"], clone, tmp / "test.log")
@@ -110,8 +118,6 @@ def main() -> None:
             print(f"clone kept in {clone}")
         else:
             shutil.rmtree(tmp, ignore_errors=True)
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"{stem}.json"
     path.write_text(json.dumps(out, indent=2))
     print(json.dumps(out, indent=2))
     print(f"wrote {path}")
