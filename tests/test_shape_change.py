@@ -106,3 +106,46 @@ def test_the_skill_env_changes_shape_on_the_fly_too():
     assert env.observation_space.contains(obs)
     _, _, terminated, _, info = env.step(np.zeros(env.action_space.shape))
     assert not info["diverged"]
+
+
+def test_setting_the_same_shape_every_step_changes_nothing():
+    """A morph sets a shape every control step, often the one the body has: the trajectory is
+    the one without the call (an earlier version lifted the body out of its soft contacts on
+    every call and the humanoid, hovering on its toes, fell within 4 s)."""
+    task = {"left_leg_length": (0.7, 1.3), "right_leg_length": (0.7, 1.3)}
+    runs = []
+    for morph in (False, True):
+        env = ParamEnv("walker", task, {"init_noise": 0.0})
+        env.reset(seed=0, options={"task": [1.1, 0.9]})
+        rng = np.random.default_rng(0)
+        for _ in range(40):
+            if morph:
+                env.set_shape({"left_leg_length": 1.1, "right_leg_length": 0.9})
+            env.step(0.2 * rng.standard_normal(env.action_space.shape))
+        runs.append(env.data.qpos.copy())
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_the_fig2a_humanoid_keeps_walking_while_its_legs_shrink_and_grow():
+    """[WL19] §5.2, Fig. 1 on the shipped Fig. 2a controller: legs 1.0 -> 0.6 -> 1.0 over 8 s,
+    rebuilt every control step, and it does not fall."""
+    from paramimic.envs import env_for
+    from paramimic.evaluation import deterministic
+    from paramimic.render import morph_path
+    from paramimic.training import checkpoint
+
+    _, cfg, policy = checkpoint.load_policy("humanoid_fig2a")
+    cfg.env = cfg.env.for_evaluation(10.0)
+    env = env_for(cfg)
+    act = deterministic(policy)
+    task = env.task_space.center.copy()
+    for i, name in enumerate(env.task_space.names):
+        task[i] = 1.0
+    path = [{"leg_length": 1.0}, {"leg_length": 0.6}, {"leg_length": 1.0}]
+    obs, _ = env.reset(seed=0, options={"task": task})
+    steps = int(round(8.0 / env.dt))
+    for i in range(steps):
+        obs = env.set_shape(morph_path(path, (i + 1) / steps))
+        obs, _, terminated, truncated, _ = env.step(act(obs[None])[0])
+        assert not terminated, f"fell at {i * env.dt:.1f} s, legs {env.task[0]:.2f}"
+    assert env.character.shape["leg_length"] == pytest.approx(1.0)

@@ -74,6 +74,13 @@ def reusable_data(model: mujoco.MjModel, data: mujoco.MjData | None) -> mujoco.M
     return mujoco.MjData(model)
 
 
+def _penetration(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """The deepest contact penetration of the body at its current positions (m, >= 0)."""
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_collision(model, data)
+    return max(0.0, -min((data.contact.dist[i] for i in range(data.ncon)), default=0.0))
+
+
 @cache
 def _reshaper(character: str) -> Reshaper:
     return Reshaper(registration(character).character)
@@ -271,18 +278,25 @@ class EnvCore(gym.Env, ABC):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"shape parameter {name!r} must be a positive number, got {value}")
             a[shape_dims[name]] = float(value)
+        if self.body_for(a) is self.character:  # the same body: nothing to carry over
+            return self._last_obs
         old = self.data  # its state, kept before the data may be reset for the new body
         qpos, qvel, ctrl, time = old.qpos.copy(), old.qvel.copy(), old.ctrl.copy(), old.time
+        warmstart = old.qacc_warmstart.copy()
         com_before = old.sensordata[self.character.com_sensor].copy()
+        depth_before = _penetration(self.model, old)
         self._task = a
         self._load(a)
         d = self.data
         d.qpos[:], d.qvel[:], d.ctrl[:] = qpos, qvel, ctrl
-        d.time = time
+        d.qacc_warmstart[:], d.time = warmstart, time
         mujoco.mj_forward(self.model, d)
-        depth = -min((d.contact.dist[i] for i in range(d.ncon)), default=0.0)
-        if depth > 0:  # lift until no penetration
-            d.qpos[self._height_adr] += depth + 1e-4
+        # Lift by what the new limbs sink deeper than the old ones rested: MuJoCo's soft contacts
+        # rest slightly inside the ground, and lifting a changing body out of it every control
+        # step would leave it hovering on its toes.
+        lift = _penetration(self.model, d) - depth_before
+        if lift > 0:
+            d.qpos[self._height_adr] += lift
             mujoco.mj_forward(self.model, d)
         self._watch_stability()
         self._shape_changed(com_before)
