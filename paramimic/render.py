@@ -3,7 +3,8 @@ Fig. 1, 4), or one body whose shape morphs along a path while it moves (§5.2).
 
 Frames come from MuJoCo's offscreen renderer (`mujoco.Renderer`), which runs on a CPU through
 EGL with Mesa's software rasterizer (`MUJOCO_GL=egl`) or OSMesa (`MUJOCO_GL=osmesa`). A camera
-tracks each body's root from the side, at a distance that follows the body's size.
+tracks each body's root from the side, at a distance that follows the body's size (a morph keeps
+one distance, its tallest body's, so that the change shows).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from collections.abc import Callable, Sequence
 import mujoco
 import numpy as np
 
+from paramimic.characters.body import Body
 from paramimic.envs.param_env import ParamEnv
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
@@ -22,8 +24,9 @@ class Camera:
     """An offscreen renderer for one environment; rebuilt when the env's model changes (a
     shape change compiles a new model)."""
 
-    def __init__(self, width: int, height: int) -> None:
+    def __init__(self, width: int, height: int, distance: float | None = None) -> None:
         self.width, self.height = width, height
+        self.fixed_distance = distance  # None: the distance follows each body's size
         self._renderer: mujoco.Renderer | None = None
         self._model: mujoco.MjModel | None = None
         self.camera = mujoco.MjvCamera()
@@ -38,9 +41,7 @@ class Camera:
             self._renderer = mujoco.Renderer(env.model, self.height, self.width)
             self._model = env.model
             self.camera.trackbodyid = env.character.root_body_id
-            self.camera.distance = 1.2 + 3.0 * env.character.hip_height
-            if env.definition.swims:
-                self.camera.distance = 2.5 * _body_length(env.model)
+            self.camera.distance = self.fixed_distance or camera_distance(env)
         assert self._renderer is not None
         self._renderer.update_scene(env.data, self.camera)
         return self._renderer.render().copy()
@@ -50,6 +51,14 @@ class Camera:
             self._renderer.close()
             self._renderer = None
             self._model = None
+
+
+def camera_distance(env: ParamEnv, body: Body | None = None) -> float:
+    """How far from its root the camera sees `body` (the env's current one) whole."""
+    body = body or env.character
+    if env.definition.swims:
+        return 2.5 * _body_length(body.model)
+    return 1.2 + 3.0 * body.hip_height
 
 
 def _body_length(model: mujoco.MjModel) -> float:
@@ -158,8 +167,14 @@ def render_morph(
     if any(set(p) != names for p in path):
         raise ValueError("every shape on a morph path must name the same parameters")
     obs, _ = env.reset(seed=seed, options={"task": task})
-    obs = env.set_shape(path[0])
-    cam = Camera(width, height)
+    obs = env.set_shape(path[0])  # (checks the names)
+    order = env.task_space.names
+    distance = 0.0
+    for shape in path:  # the camera's distance: the tallest body's on the path
+        a = env.task
+        a[[order.index(n) for n in shape]] = list(shape.values())
+        distance = max(distance, camera_distance(env, env.body_for(a)))
+    cam = Camera(width, height, distance)
     frames = [label(cam.frame(env), shape_label(env))]
     steps = int(round(seconds / env.dt))
     for i in range(steps):

@@ -368,6 +368,10 @@ def render(
         typer.Option(help="one body whose shape morphs along the given shapes ([WL19] §5.2)"),
     ] = False,
     seed: Annotated[int, typer.Option()] = 0,
+    fps: Annotated[
+        float | None,
+        typer.Option(help="frames per second of the file (default: the control rate)"),
+    ] = None,
 ) -> None:
     """Render the controller on several bodies side by side, or one morphing body."""
     _headless_gl()  # before anything imports mujoco: it picks its GL backend at import
@@ -378,6 +382,8 @@ def render(
         _fail(f"--out must end in one of {VIDEO_SUFFIXES}, got {out.name!r}")
     if seconds <= 0 or width < 16 or height < 16:
         _fail("--seconds must be positive and --width/--height at least 16")
+    if fps is not None and not fps > 0:
+        _fail("--fps must be positive")
     from paramimic.envs import env_for
     from paramimic.evaluation import deterministic
 
@@ -407,8 +413,10 @@ def render(
     else:
         maker = lambda: env_for(cfg)  # noqa: E731
         frames = render_family(act, maker, tasks, seconds, width, height, seed)
-    path = write_animation(frames, out, fps=1.0 / env.dt)
-    console.print(f"wrote {path} ({len(frames)} frames, {frames[0].shape[1]}x{frames[0].shape[0]})")
+    stride = 1 if fps is None else max(1, round(1.0 / (env.dt * fps)))  # every stride-th frame
+    path = write_animation(frames[::stride], out, fps=1.0 / (env.dt * stride))
+    n, (h, w) = len(frames[::stride]), frames[0].shape[:2]
+    console.print(f"wrote {path} ({n} frames, {w}x{h})")
 
 
 @app.command("upgrade-checkpoint")

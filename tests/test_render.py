@@ -73,11 +73,40 @@ def test_render_morph_mp4(biped_run, tmp_path):
     out = tmp_path / "morph.mp4"
     res = _cli(
         "render", biped_run, "--shapes", "global_z=0.7;global_z=1.3", "--morph",
-        "--out", out, "--seconds", 0.3, "--width", 64, "--height", 48,
+        "--out", out, "--seconds", 0.6, "--width", 64, "--height", 48, "--fps", 15,
     )  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     frames = np.stack(list(iio.imiter(out)))
-    assert frames.shape[1:3] == (48, 64) and 2 <= frames.shape[0] <= 10
+    # 0.6 s at the 30 Hz control rate is 19 frames with the first; every second one at 15 fps
+    assert frames.shape[1:3] == (48, 64) and frames.shape[0] == 10
+
+
+def test_a_morph_is_seen_from_one_distance_the_tallest_bodys(biped_run, tmp_path):
+    """A morphing body shrinks on screen: the camera keeps the tallest body's distance, where a
+    family's panels each follow their own body's size."""
+    from paramimic.envs import ParamEnv
+    from paramimic.render import camera_distance
+
+    env = ParamEnv("biped_lower", {"global_z": (0.6, 1.4)})
+    env.reset(seed=0, options={"task": [0.6]})
+    tall = env.body_for(np.array([1.4]))
+    assert camera_distance(env, tall) > camera_distance(env) + 0.1  # the sizes differ
+    out = tmp_path / "shrink.gif"
+    res = _cli(
+        "render", biped_run, "--shapes", "global_z=1.4;global_z=0.6", "--morph",
+        "--out", out, "--seconds", 0.2, "--width", 96, "--height", 64,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    frames = iio.imread(out)[..., :3]
+    # the small body at the end, seen from the tall body's distance: fewer body pixels
+    first, last = _body_pixels(frames[0]), _body_pixels(frames[-1])
+    assert 0 < last < 0.8 * first
+
+
+def _body_pixels(frame: np.ndarray) -> int:
+    """Pixels of the body: bluish grey, where the floor is neutral grey."""
+    f = frame.astype(int)
+    return int(((f[..., 2] - f[..., 0]) > 12).sum())
 
 
 def test_render_rejects_bad_input(biped_run, tmp_path):
@@ -91,6 +120,8 @@ def test_render_rejects_bad_input(biped_run, tmp_path):
         "render", biped_run, "--shapes", "global_z=1", "--morph", "--out", tmp_path / "x.gif"
     )
     assert res.returncode == 2 and "at least two" in res.stdout
+    res = _cli("render", biped_run, "--fps", 0, "--out", tmp_path / "x.gif")
+    assert res.returncode == 2 and "--fps" in res.stdout
 
 
 def test_eval_heatmap_png(biped_run, tmp_path):
