@@ -19,13 +19,19 @@ PNG). Each body's forward speed is compared with its own target speed, the clip'
     python benchmarks/humanoid_families.py eval RUN_DIR|CHECKPOINT [--bodies 300] [--seed 2025]
     python benchmarks/humanoid_families.py eval configs/humanoid_fig2b.yaml --base
     python benchmarks/humanoid_families.py table
+    python benchmarks/humanoid_families.py morph humanoid_fig2a [--starts 10]
 
 `--base` judges the family's starting point: its base controller adopted by the family's
 config (`train.init_from`, new task inputs ignored at first) before any family training, the
 row at 0 env steps that says what the family run added.
 
+`morph` is [WL19] §5.2 and Fig. 1 (top): one body walking while its shape follows a path,
+rebuilt every control step (legs 2.0 -> 0.5, arms 1.0 -> 1.5, back to the start), over 6, 12 and
+24 s, from `--starts` random phases each; it counts the starts that fall before the path ends.
+
 Writes benchmarks/results/humanoid_families/humanoid_family_<config>_s<seed>_<k steps>k.json and
-its heatmap PNG beside it; `table` writes the results section of docs/humanoid_families.md.
+its heatmap PNG beside it (`morph`: morph_<controller>.json); `table` writes the results section
+of docs/humanoid_families.md.
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ from humanoid import training_wall_clock  # benchmarks/humanoid.py, beside this 
 from tabulate import tabulate
 
 from paramimic.config import load_config
-from paramimic.evaluation import SPEED_TOLERANCE, evaluate_config
+from paramimic.envs import env_for
+from paramimic.evaluation import SPEED_TOLERANCE, deterministic, evaluate_config, morph_episode
 from paramimic.training import checkpoint
 from paramimic.training.trainer import Trainer
 from services.media import write_heatmap
@@ -105,6 +112,45 @@ def evaluate_family(run: Path, bodies: int, seed: int, base: bool = False) -> di
     return out
 
 
+# [WL19] Fig. 1 (top) on Fig. 2a's bodies: the tall body shrinks to half, its arms grow, it returns
+FIG1_PATH = [
+    {"leg_length": 2.0, "arm_length": 1.0},
+    {"leg_length": 0.5, "arm_length": 1.0},
+    {"leg_length": 0.5, "arm_length": 1.5},
+    {"leg_length": 2.0, "arm_length": 1.0},
+]
+
+
+def morph(run: Path, starts: int, durations=(6.0, 12.0, 24.0)) -> dict:
+    """Falls of one body walking while its shape follows FIG1_PATH ([WL19] §5.2)."""
+    state, cfg, policy = checkpoint.load_policy(run)
+    cfg.env = cfg.env.for_evaluation(max(durations) + 1.0)
+    env = env_for(cfg)
+    act = deterministic(policy)
+    task = env.task_space.center.copy()
+    for i, name in enumerate(env.task_space.names):
+        task[i] = FIG1_PATH[0].get(name, 1.0)
+    rows = []
+    for seconds in durations:
+        episodes = [morph_episode(act, env, task, FIG1_PATH, seconds, s) for s in range(starts)]
+        rows.append({
+            "seconds": seconds,
+            "starts": starts,
+            "falls": sum(e["fell"] for e in episodes),
+            "mean_speed": float(np.mean([e["distance"] / e["seconds"] for e in episodes])),
+            "episodes": episodes,
+        })  # fmt: skip
+        print(f"{seconds:.0f} s: {rows[-1]['falls']} of {starts} starts fell")
+    return {
+        "controller": str(run),
+        "config": cfg.name,
+        "train_seed": cfg.train.seed,
+        "env_steps": int(state["progress"]["env_steps"]),
+        "path": FIG1_PATH,
+        "rows": rows,
+    }
+
+
 def _rows() -> dict[str, list[dict]]:
     rows: dict[str, list[dict]] = {}
     for path in sorted(RESULTS.glob("humanoid_family_*k.json")):
@@ -164,9 +210,18 @@ def main() -> None:
     e.add_argument("--seed", type=int, default=EVAL_SEED)
     e.add_argument("--base", action="store_true", help="RUN is a family config: judge its start")
     sub.add_parser("table")
+    m = sub.add_parser("morph")
+    m.add_argument("run", type=Path, help="run, checkpoint or shipped controller of Fig. 2a")
+    m.add_argument("--starts", type=int, default=10)
     args = ap.parse_args()
     if args.cmd == "table":
         print(table())
+        return
+    if args.cmd == "morph":
+        r = morph(args.run, args.starts)
+        path = RESULTS / f"morph_{args.run.name.removesuffix('.pt')}.json"
+        path.write_text(json.dumps(r, indent=2))
+        print(f"wrote {path}")
         return
     r = evaluate_family(args.run, args.bodies, args.seed, args.base)
     RESULTS.mkdir(parents=True, exist_ok=True)

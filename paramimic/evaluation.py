@@ -11,7 +11,7 @@ root path, m) and the forward speed against the clip's.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +44,57 @@ def deterministic(policy: ActorCritic) -> Act:
     """The policy's mean action."""
     fast = policy.numpy_policy()
     return lambda obs: fast.act(obs, None)[0]
+
+
+def morph_path(path: Sequence[dict[str, float]], t: float) -> dict[str, float]:
+    """Piecewise-linear interpolation along shapes `path` at t ∈ [0, 1]."""
+    if len(path) == 1:
+        return dict(path[0])
+    x = min(max(t, 0.0), 1.0) * (len(path) - 1)
+    k = min(int(x), len(path) - 2)
+    u = x - k
+    return {n: (1 - u) * path[k][n] + u * path[k + 1][n] for n in path[0]}
+
+
+def morph_episode(
+    act: Act,
+    env: ParamEnv,
+    task: np.ndarray,
+    path: Sequence[dict[str, float]],
+    seconds: float,
+    seed: int = 0,
+    watch: Callable[[], None] | None = None,
+) -> dict:
+    """[WL19] §5.2: one body whose shape follows `path` over `seconds`, `set_shape` every
+    control step with the policy in control throughout; ends early if the body falls. `watch`
+    is called on the start and after every step (a camera). Returns whether it fell, when, the
+    shape then and the root's forward distance."""
+    names = set(path[0])
+    if any(set(p) != names for p in path):
+        raise ValueError("every shape on a morph path must name the same parameters")
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    obs = env.set_shape(path[0])
+    x0 = float(env.data.qpos[0])
+    if watch:
+        watch()
+    steps = int(round(seconds / env.dt))
+    fell, done = False, 0
+    for i in range(steps):
+        obs = env.set_shape(morph_path(path, (i + 1) / steps))
+        obs, _, terminated, truncated, _ = env.step(act(obs[None])[0])
+        done = i + 1
+        if watch:
+            watch()
+        if terminated or truncated:
+            fell = bool(terminated)
+            break
+    shape = {n: float(env.task[env.task_space.names.index(n)]) for n in sorted(names)}
+    return {
+        "fell": fell,
+        "seconds": done * env.dt,
+        "shape": shape,
+        "distance": float(env.data.qpos[0]) - x0,
+    }
 
 
 def run_episodes(

@@ -16,8 +16,7 @@ import numpy as np
 
 from paramimic.characters.body import Body
 from paramimic.envs.param_env import ParamEnv
-
-Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
+from paramimic.evaluation import Act, morph_episode
 
 
 class Camera:
@@ -141,16 +140,6 @@ def render_family(
     return frames
 
 
-def morph_path(path: Sequence[dict[str, float]], t: float) -> dict[str, float]:
-    """Piecewise-linear interpolation along shapes `path` at t ∈ [0, 1]."""
-    if len(path) == 1:
-        return dict(path[0])
-    x = min(max(t, 0.0), 1.0) * (len(path) - 1)
-    k = min(int(x), len(path) - 2)
-    u = x - k
-    return {n: (1 - u) * path[k][n] + u * path[k + 1][n] for n in path[0]}
-
-
 def render_morph(
     act: Act,
     env: ParamEnv,
@@ -161,27 +150,20 @@ def render_morph(
     height: int = 240,
     seed: int = 0,
 ) -> list[np.ndarray]:
-    """One body whose shape follows `path` over `seconds` ([WL19] §5.2): `set_shape` every
-    control step, the policy in control throughout. Ends early if the body falls."""
-    names = set(path[0])
-    if any(set(p) != names for p in path):
-        raise ValueError("every shape on a morph path must name the same parameters")
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    obs = env.set_shape(path[0])  # (checks the names)
+    """Frames of one body whose shape follows `path` over `seconds` ([WL19] §5.2, Fig. 1):
+    `morph_episode` seen from one distance, the tallest body's on the path."""
     order = env.task_space.names
     distance = 0.0
     for shape in path:  # the camera's distance: the tallest body's on the path
-        a = env.task
-        a[[order.index(n) for n in shape]] = list(shape.values())
+        a = np.array(task, dtype=float)
+        for name, value in shape.items():
+            a[order.index(name)] = value  # (names were checked against the task space)
         distance = max(distance, camera_distance(env, env.body_for(a)))
     cam = Camera(width, height, distance)
-    frames = [label(cam.frame(env), shape_label(env))]
-    steps = int(round(seconds / env.dt))
-    for i in range(steps):
-        obs = env.set_shape(morph_path(path, (i + 1) / steps))
-        obs, _, terminated, truncated, _ = env.step(act(obs[None])[0])
-        frames.append(label(cam.frame(env), shape_label(env)))
-        if terminated or truncated:
-            break
+    frames: list[np.ndarray] = []
+    morph_episode(
+        act, env, task, path, seconds, seed,
+        watch=lambda: frames.append(label(cam.frame(env), shape_label(env))),
+    )  # fmt: skip
     cam.close()
     return frames

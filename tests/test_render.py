@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from paramimic.render import morph_path
+from paramimic.evaluation import morph_path
 
 TINY_BIPED = {
     "character": "biped_lower",
