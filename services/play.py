@@ -3,7 +3,8 @@
 One simulation thread steps the env at the control rate (30 Hz) with the policy's mean action and
 renders every step offscreen (MUJOCO_GL=egl); the page shows the frames as an MJPEG stream and
 has a slider per task parameter: a shape slider changes the body on the fly ([WL19] §5.2,
-`set_shape`), a goal slider the goal (`set_goal`); an [L21] run's page sets the task and
+`set_shape`; the body follows the slider at up to SHAPE_RATE per second), a goal slider the goal
+(`set_goal`); an [L21] run's page sets the task and
 "performs" the skill m_a = P_θ(a) from a reset. The loop never drops a control step: on a
 machine that cannot keep 30 Hz it runs slower than real time, and says so (real-time factor).
 """
@@ -29,6 +30,10 @@ from services.asgi import BodyLimit
 STATIC = Path(__file__).resolve().parent / "api" / "static"
 STEER = 0.15  # rad per arrow key press (3D bodies: the target direction)
 RESTART_AFTER = 1.0  # seconds a fallen body stays down before the episode restarts
+# How fast the body follows a shape slider (shape units per second, each parameter): the Fig. 2a
+# humanoid walks through its legs changing 0.19/s and falls on half the starts at 0.38/s
+# (`benchmarks/humanoid_families.py morph`), so a quick drag of the slider does not fell it.
+SHAPE_RATE = 0.15
 MAX_BODY = 4096  # bytes: the largest request (a task's values) is well under 1 KB
 COOKIE = "paramimic_play"
 FREE, TRACKING = 0, 1  # mujoco.mjtCamera: a fixed view, or one that follows the root
@@ -98,9 +103,8 @@ class Session:
         with self.lock:
             for name, value in values.items():
                 self.task[names.index(name)] = value
-            shape = {n: v for n, v in values.items() if n in self.shape_names}
-            if shape:  # the body changes on the fly ([WL19] §5.2), in both kinds of run
-                self.obs = self.env.set_shape(shape)
+            # a shape parameter: the body follows it on the fly from the next step on ([WL19]
+            # §5.2), in both kinds of run
             if self.kind == "skill":  # [L21] goals and conditions act at the next `perform`
                 return
             for name, value in values.items():
@@ -145,12 +149,27 @@ class Session:
                     finally:
                         self.lock.acquire()
                 return
+            self._follow_shape()
             action = self.act.act(self.obs[None].astype(np.float32), None)[0][0]
             self.obs, _, terminated, truncated, info = self.env.step(action)
             self.reward_terms = {k: float(v) for k, v in info.get("reward_terms", {}).items()}
             self.speed = float(self.env.data.qvel[0])
             if terminated or truncated:
                 self.fell_at = time.perf_counter()
+
+    def _follow_shape(self) -> None:
+        """Move the body one control step toward the sliders' shape, at SHAPE_RATE at most."""
+        now, names = self.env.task, self.space.names
+        limit = SHAPE_RATE * self.env.dt
+        shape = {}
+        for name in self.shape_names:
+            i = names.index(name)
+            gap = self.task[i] - now[i]
+            if gap != 0:
+                near = abs(gap) <= limit
+                shape[name] = float(self.task[i] if near else now[i] + np.sign(gap) * limit)
+        if shape:
+            self.obs = self.env.set_shape(shape)
 
     def _render(self) -> None:
         from PIL import Image
@@ -178,6 +197,7 @@ class Session:
             task = self.space.to_dict(self.task)
             vbar = float(self.marginal.predict(self.task)[0]) if self.marginal.fitted else None
             body = self.env.character
+            now = self.space.to_dict(self.env.task)
             return {
                 "run": self.cfg.name, "character": self.cfg.character,
                 "kind": self.kind,
@@ -186,7 +206,8 @@ class Session:
                 "goals": [n for n in self.space.names if n not in self.shape_names],
                 "units": self.units,
                 "body": {"hip_height": float(body.hip_height),
-                         "mass": float(self.env.model.body_mass.sum())},
+                         "mass": float(self.env.model.body_mass.sum()),
+                         "shape": {n: now[n] for n in sorted(self.shape_names)}},
                 "paused": self.paused, "follow": self.follow, "fallen": self.fell_at is not None,
                 "reward_terms": self.reward_terms, "speed": self.speed, "vbar": vbar,
                 "mu": self.marginal.mu, "real_time_factor": self.rtf, "frame": self.frame_id,

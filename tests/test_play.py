@@ -95,6 +95,10 @@ def test_a_slider_changes_the_body_and_frames_keep_coming(browser, play_url, scr
         "s.value = 1.2; s.dispatchEvent(new Event('input')); s.dispatchEvent(new Event('change'));"
     )
     wait_until(lambda: abs(state()["task"]["left_leg_length"] - 1.2) < 1e-6, 30, "the new task")
+    # the body follows the slider at SHAPE_RATE: 0.2 in 1.3 s of simulated time
+    wait_until(
+        lambda: state()["body"]["shape"]["left_leg_length"] == pytest.approx(1.2), 60, "the body"
+    )
     after = state()
     assert after["body"]["mass"] != pytest.approx(before["body"]["mass"], rel=1e-6)
     wait_until(lambda: state()["frame"] > after["frame"] + 10, 60, "frames after the change")
@@ -113,7 +117,7 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
 
     from paramimic.config import load_config
     from paramimic.training.trainer import SerialBackend, Trainer
-    from services.play import Session, create_app
+    from services.play import SHAPE_RATE, Session, create_app
 
     LOOPBACK = "http://127.0.0.1"  # play answers loopback Host headers only
     TOKEN = "a-session-token"
@@ -155,7 +159,11 @@ def test_a_skill_run_performs_the_chosen_task_and_a_3d_body_steers(tmp_path):
         mass = state["body"]["mass"]
         after = client.post("/task", json={"values": {name: hi}}).json()
         assert after["task"][name] == pytest.approx(hi)
+        body._step()  # the body follows the slider one step at a time
+        after = client.get("/state").json()
         assert after["body"]["mass"] != pytest.approx(mass, rel=1e-6)
+        gap = abs(after["body"]["shape"][name] - state["body"]["shape"][name])
+        assert 0 < gap <= SHAPE_RATE * body.env.dt + 1e-9
     body.stop.set()
 
     steer = {"task.target_direction": [-1.0, 1.0], "env.max_episode_seconds": 2.0}
@@ -201,3 +209,26 @@ def test_play_wants_its_session_token_and_a_small_body(play_url):
         big = {"values": {"target_velocity": 1.0}, "pad": "x" * 5000}
         r = c.post("/task", json=big)
         assert r.status_code == 413 and "4096 bytes" in r.json()["detail"]
+
+
+def test_the_fig2a_humanoid_keeps_walking_while_play_sliders_move_its_legs_and_arms():
+    """`paramimic play humanoid_fig2a`: the sliders jump (legs 1.0 -> 0.6 and arms -> 1.4, then
+    legs -> 1.5) and the walking body follows them at SHAPE_RATE without falling."""
+    from paramimic.training import checkpoint
+    from services.play import SHAPE_RATE, Session
+
+    state, cfg, policy = checkpoint.load_policy("humanoid_fig2a")
+    cfg.env = cfg.env.for_evaluation(30.0)
+    session = Session(cfg, policy, state)
+    steps = lambda seconds: range(int(round(seconds / session.env.dt)))  # noqa: E731
+    for _ in steps(1.0):
+        session._step()
+    for values in ({"leg_length": 0.6, "arm_length": 1.4}, {"leg_length": 1.5}):
+        session.set(values)
+        for _ in steps(0.9 / SHAPE_RATE + 1.0):  # the largest change, then a second more
+            session._step()
+            assert session.fell_at is None, session.state()["body"]
+        assert session.state()["body"]["shape"] == pytest.approx(
+            {"leg_length": values["leg_length"], "arm_length": 1.4, "height": 1.0, "thickness": 1.0}
+        )
+    session.stop.set()

@@ -142,3 +142,13 @@ def test_the_fig2a_humanoid_keeps_walking_while_its_legs_shrink_and_grow():
     assert not out["fell"], out
     assert out["seconds"] == pytest.approx(8.0) and out["shape"] == {"leg_length": 1.0}
     assert out["distance"] > 3.0  # it walked on (the clip's speed is about 1.2 m/s)
+
+
+def test_the_env_keeps_its_own_copy_of_the_task_it_was_reset_with():
+    """A caller's array changed after a reset (play's sliders) changes nothing in the env:
+    the body follows only through set_shape."""
+    env = ParamEnv("walker", {"left_leg_length": (0.8, 1.2), "right_leg_length": (0.8, 1.2)})
+    task = np.array([1.0, 1.0])
+    env.reset(seed=0, options={"task": task})
+    task[0] = 1.2
+    assert env.task[0] == 1.0 and env.character.shape["left_leg_length"] == 1.0

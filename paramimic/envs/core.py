@@ -173,7 +173,7 @@ class EnvCore(gym.Env, ABC):
         a = (
             self.task_space.from_dict(task)
             if isinstance(task, Mapping)
-            else np.asarray(task, dtype=np.float64).reshape(-1)
+            else np.array(task, dtype=np.float64).reshape(-1)  # a copy: the caller keeps theirs
         )
         if a.shape != (self.task_space.dim,) or not self.task_space.contains(a)[0]:
             raise ValueError(f"task {a} is not inside the task space {self.task_space.ranges()}")
