@@ -100,13 +100,21 @@ def train(
         Path | None,
         typer.Option(help="override train.init_from: warm start from this run's controller"),
     ] = None,
+    sets: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            help="override any field: KEY=VALUE (YAML value), e.g. --set curriculum.k=0 "
+            "--set name=fig2a_uniform (give them again with --resume)",
+        ),
+    ] = None,
 ) -> None:
     """Train a controller for CONFIG: Redis, Ray actors, the sampler and the API, or --serial."""
     from services.launch.training import LaunchError, LaunchOptions, run_training
     from services.store import with_password
 
     _warn_secrets_on_argv()
-    overrides = {
+    overrides = _parse_sets(sets) | {
         k: v
         for k, v in {
             "train.total_steps": total_steps,
@@ -147,6 +155,22 @@ def train(
         _fail(str(e))
     if code:
         raise typer.Exit(code=code)
+
+
+def _parse_sets(sets: list[str] | None) -> dict:
+    """--set KEY=VALUE items as dotted config overrides, each VALUE parsed as YAML."""
+    import yaml
+
+    overrides = {}
+    for item in sets or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            _fail(f"--set {item!r}: KEY=VALUE, e.g. ppo.num_epochs=5")
+        try:
+            overrides[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as e:
+            _fail(f"--set {item!r}: the value is not YAML: {e}")
+    return overrides
 
 
 def _warn_secrets_on_argv() -> None:
@@ -544,18 +568,12 @@ def config_show(
 ) -> None:
     """Every field of CONFIG with its value and where it comes from: the config, its recipe
     (with the paper's section or our study), or the library default (with its description)."""
-    import yaml
     from rich.table import Table
 
     from paramimic.config import ExperimentConfig, field_descriptions, inline_measures, raw_config
     from paramimic.recipes import flatten, sources
 
-    overrides = {}
-    for item in sets or []:
-        key, sep, value = item.partition("=")
-        if not sep:
-            _fail(f"--set {item!r}: KEY=VALUE, e.g. ppo.num_epochs=5")
-        overrides[key] = yaml.safe_load(value)
+    overrides = _parse_sets(sets)
     try:
         raw = raw_config(config, overrides)
         cfg = load_config(config, overrides)

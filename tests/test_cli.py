@@ -151,6 +151,25 @@ def test_bad_config_fails_before_anything_starts(tmp_path):
     assert not (tmp_path / "run").exists()
 
 
+def test_train_set_overrides_any_field_and_a_bad_one_fails_naming_it(tmp_path):
+    cfg = tmp_path / "tiny.yaml"
+    cfg.write_text(yaml.safe_dump(TINY))
+    run = tmp_path / "run"
+    res = _cli(
+        "train", cfg, "--serial", "--run-dir", run, "--total-steps", 256,
+        "--set", "curriculum.k=0", "--set", "name=tiny_uniform", "--set", "ppo.num_epochs=1",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    saved = yaml.safe_load((run / "config.yaml").read_text())
+    assert saved["name"] == "tiny_uniform" and saved["curriculum"]["k"] == 0
+    assert saved["ppo"]["num_epochs"] == 1
+    res = _cli("train", cfg, "--serial", "--run-dir", tmp_path / "r2", "--set", "ppo.num_epochs")
+    assert res.returncode == 2 and "KEY=VALUE" in res.stdout
+    res = _cli("train", cfg, "--serial", "--run-dir", tmp_path / "r2", "--set", "ppo.num_epochs=0")
+    assert res.returncode == 2 and "ppo.num_epochs" in res.stdout
+    assert not (tmp_path / "r2").exists()
+
+
 def test_ctrl_c_checkpoints_and_exits(tmp_path):
     cfg = tmp_path / "long.yaml"
     cfg.write_text(
