@@ -264,9 +264,10 @@ class EnvCore(gym.Env, ABC):
 
     def set_shape(self, shape: Mapping[str, float]) -> np.ndarray:
         """Change the body mid-episode ([WL19] §5.2): rebuild the model for the new shape, copy
-        joint positions, velocities and controls, lift the body out of the ground if its limbs
-        grew, and carry on from the same state and phase. The shape parameters must be task
-        dimensions (the policy observes them). Returns the new observation."""
+        joint positions, velocities and controls, lift the body by what its grown limbs sink
+        into the ground, and carry on from the same state and phase (the body's own shape:
+        nothing changes). The shape parameters must be task dimensions (the policy observes
+        them). Returns the new observation."""
         a = self._task.copy()
         shape_dims = dict(self._shape_idx)
         for name, value in shape.items():
