@@ -21,6 +21,11 @@ PNG). Each body's forward speed is compared with its own target speed, the clip'
     python benchmarks/humanoid_families.py table
     python benchmarks/humanoid_families.py morph humanoid_fig2a [--starts 10]
 
+Fig. 6 on the humanoid: a family's uniform arm is the same config trained with `--set
+curriculum.k=0 --set name=<family>_uniform` (same seed, same budget); `table` pairs it with the
+adaptive run at equal env steps and compares the worst-decile return (target >= 1.2x) and the
+CV of the per-body return.
+
 `--base` judges the family's starting point: its base controller adopted by the family's
 config (`train.init_from`, new task inputs ignored at first) before any family training, the
 row at 0 env steps that says what the family run added.
@@ -57,6 +62,8 @@ RESULTS = ROOT / "benchmarks" / "results" / "humanoid_families"
 DOCS = ROOT / "docs" / "humanoid_families.md"
 MARK = ("<!-- results -->", "<!-- /results -->")
 EVAL_SEED = 2025  # never a training seed
+UNIFORM = "_uniform"  # the name suffix of a family's uniform-sampling arm (curriculum.k = 0)
+UNIFORM_TARGET = 1.2  # adaptive's worst decile over uniform's at equal budget
 # family -> (falls %, |speed over target - 1|, env steps of the family run); None: measured only
 TARGETS = {
     "humanoid_fig2a": (10.0, SPEED_TOLERANCE, 40_000_000),
@@ -195,10 +202,42 @@ def table() -> str:
             )
     body = tabulate(lines, headers=header, tablefmt="github", disable_numparse=True)
     body += "\n\n" + ("\n".join(verdicts) if verdicts else "No family has a judged row yet.")
+    body += k_comparison(_rows())
     text = DOCS.read_text()
     start, end = text.index(MARK[0]) + len(MARK[0]), text.index(MARK[1])
     DOCS.write_text(text[:start] + "\n" + body + "\n" + text[end:])
     return body
+
+
+def k_comparison(rows: dict[str, list[dict]]) -> str:
+    """[WL19] Fig. 6 on a humanoid family: its adaptive sampling (the config's k) against its
+    uniform arm (`--set curriculum.k=0 --set name=<family>_uniform`), the same seed at the same
+    env steps (within 2 %). Target: the worst-decile return >= UNIFORM_TARGET x uniform's."""
+    lines = []
+    for config, runs in sorted(rows.items()):
+        uniform = rows.get(config + UNIFORM)
+        for r in runs if uniform else []:
+            same = [u for u in uniform if u["train_seed"] == r["train_seed"]
+                    and abs(u["env_steps"] - r["env_steps"]) <= 0.02 * r["env_steps"]]  # fmt: skip
+            if r.get("base_controller") or not same:
+                continue
+            a, u = r["report"], same[0]["report"]
+            ratio = a["worst_decile_return"] / u["worst_decile_return"]
+            lines.append([
+                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
+                f"{a['worst_decile_return']:.1f}", f"{u['worst_decile_return']:.1f}",
+                f"{ratio:.2f}x", f"{a['uniformity']['coefficient_of_variation']:.3f}",
+                f"{u['uniformity']['coefficient_of_variation']:.3f}",
+                f"{a['fall_percent']:.1f} % / {u['fall_percent']:.1f} %",
+                "yes" if ratio >= UNIFORM_TARGET else "no",
+            ])  # fmt: skip
+    if not lines:
+        return ""
+    header = ["family", "seed", "env steps", "worst decile (adaptive)", "worst decile (uniform)",
+              "ratio", "CV (adaptive)", "CV (uniform)", "falls (adaptive / uniform)",
+              f">= {UNIFORM_TARGET}x"]  # fmt: skip
+    table = tabulate(lines, headers=header, tablefmt="github", disable_numparse=True)
+    return "\n\nAdaptive sampling against uniform at equal budget ([WL19] Fig. 6):\n\n" + table
 
 
 def main() -> None:
