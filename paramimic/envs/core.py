@@ -74,11 +74,9 @@ def reusable_data(model: mujoco.MjModel, data: mujoco.MjData | None) -> mujoco.M
     return mujoco.MjData(model)
 
 
-def _penetration(model: mujoco.MjModel, data: mujoco.MjData) -> float:
-    """The deepest contact penetration of the body at its current positions (m, >= 0)."""
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_collision(model, data)
-    return max(0.0, -min((data.contact.dist[i] for i in range(data.ncon)), default=0.0))
+def _penetration(data: mujoco.MjData) -> float:
+    """The deepest penetration among `data`'s contacts (m, >= 0)."""
+    return max(0.0, -float(data.contact.dist[: data.ncon].min(initial=0.0)))
 
 
 @cache
@@ -285,7 +283,9 @@ class EnvCore(gym.Env, ABC):
         qpos, qvel, ctrl, time = old.qpos.copy(), old.qvel.copy(), old.ctrl.copy(), old.time
         warmstart = old.qacc_warmstart.copy()
         com_before = old.sensordata[self.character.com_sensor].copy()
-        depth_before = _penetration(self.model, old)
+        mujoco.mj_kinematics(self.model, old)  # the contacts at the state's own positions
+        mujoco.mj_collision(self.model, old)
+        depth_before = _penetration(old)
         self._task = a
         self._load(a)
         d = self.data
@@ -295,7 +295,7 @@ class EnvCore(gym.Env, ABC):
         # Lift by what the new limbs sink deeper than the old ones rested: MuJoCo's soft contacts
         # rest slightly inside the ground, and lifting a changing body out of it every control
         # step would leave it hovering on its toes.
-        lift = _penetration(self.model, d) - depth_before
+        lift = _penetration(d) - depth_before  # (mj_forward found the contacts)
         if lift > 0:
             d.qpos[self._height_adr] += lift
             mujoco.mj_forward(self.model, d)
