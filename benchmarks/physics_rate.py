@@ -12,6 +12,8 @@ Control stays at 30 Hz ([WL19] Table 2); only `env.physics_hz` (the MuJoCo time 
 - `divergence`: random bodies at the corners of their shape ranges (every shape parameter at its
   low or high end) under uniform random actions for 2 s each: the share of episodes that
   diverge (NaN, exploding velocities or MuJoCo's own reset: the env's `diverged`).
+- `stable_pd`: `fidelity` and `divergence` again with the servos as [WL19] Eq. 3's stable PD
+  (`env.stable_pd`), fidelity still against the plain servos at 600 Hz.
 - `learning`: walker_base (or --config) trained for the same wall-clock budget at each rate
   (--seeds), evaluated on 300 episodes at the rate it trained at; run one (rate, seed) per
   process, two at a time: `python benchmarks/physics_rate.py learning --rate 300 --seed 0`.
@@ -19,7 +21,7 @@ Control stays at 30 Hz ([WL19] Table 2); only `env.physics_hz` (the MuJoCo time 
 Writes benchmarks/results/physics_rate/physics_rate.json (and
 physics_rate_learning_<cfg>_<hz>_s<seed>.json).
 
-    python benchmarks/physics_rate.py speed fidelity divergence [--bodies 300]
+    python benchmarks/physics_rate.py speed fidelity divergence stable_pd [--bodies 300]
     python benchmarks/physics_rate.py learning --rate 300 --seed 0 [--budget 300]
     python benchmarks/physics_rate.py merge
 """
@@ -74,10 +76,10 @@ def speed(rounds: int = 3, steps: int = 600) -> dict:
     return out
 
 
-def _open_loop(name: str, hz: int, seconds: float = 10.0) -> dict:
+def _open_loop(name: str, hz: int, seconds: float = 10.0, stable_pd: bool = False) -> dict:
     """COM height [T], foot contacts [T, F] and joint angles [T, J] under the reference
     motion's PD targets, from the reference's first pose on the base body."""
-    env = _env(name, hz, init_noise=0.0, max_episode_seconds=1e6)
+    env = _env(name, hz, init_noise=0.0, max_episode_seconds=1e6, stable_pd=stable_pd)
     env.reset(seed=0, options={"task": env.task_space.center})
     c, m, d = env.character, env.model, env.data
     steps = int(round(seconds * CONTROL_HZ))
@@ -104,13 +106,14 @@ def _open_loop(name: str, hz: int, seconds: float = 10.0) -> dict:
     return {"com": np.array(com), "contact": np.array(contact), "joints": np.array(joints)}
 
 
-def fidelity() -> dict:
+def fidelity(stable_pd: bool = False) -> dict:
+    """Against the plain servos at 600 Hz, with plain or stable PD servos at every rate."""
     out = {}
     one = CONTROL_HZ  # control steps in 1 s
     for name in CHARACTERS:
         ref = _open_loop(name, 600)
         for hz in RATES:
-            run = ref if hz == 600 else _open_loop(name, hz)
+            run = ref if hz == 600 and not stable_pd else _open_loop(name, hz, stable_pd=stable_pd)
             dz = run["com"] - ref["com"]
             dq = run["joints"][one - 1] - ref["joints"][one - 1]
             out.setdefault(name, {})[str(hz)] = {
@@ -122,13 +125,13 @@ def fidelity() -> dict:
     return out
 
 
-def divergence(bodies: int) -> dict:
+def divergence(bodies: int, stable_pd: bool = False) -> dict:
     out = {}
     for name in CHARACTERS:
         params = get_character(name).shape_params
         task = {p.name: (p.low, p.high) for p in params}
         for hz in RATES:
-            env = _env(name, hz, task, max_episode_seconds=2.0)
+            env = _env(name, hz, task, max_episode_seconds=2.0, stable_pd=stable_pd)
             rng = np.random.default_rng(0)
             diverged = 0
             for b in range(bodies):
@@ -194,8 +197,8 @@ def merge_learning() -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("stages", nargs="+", choices=["speed", "fidelity", "divergence", "learning",
-                                                  "merge"])  # fmt: skip
+    ap.add_argument("stages", nargs="+", choices=["speed", "fidelity", "divergence", "stable_pd",
+                                                  "learning", "merge"])  # fmt: skip
     ap.add_argument("--bodies", type=int, default=300)
     ap.add_argument("--config", default="configs/walker_base.yaml")
     ap.add_argument("--rate", type=int, default=600)
@@ -212,6 +215,11 @@ def main() -> None:
             report["fidelity"] = fidelity()
         elif stage == "divergence":
             report["divergence"] = divergence(args.bodies)
+        elif stage == "stable_pd":
+            report["stable_pd"] = {
+                "fidelity": fidelity(stable_pd=True),
+                "divergence": divergence(args.bodies, stable_pd=True),
+            }
         elif stage == "learning":
             learning(args.config, args.rate, args.seed, args.budget)
         report["learning"] = merge_learning()

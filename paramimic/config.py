@@ -230,6 +230,12 @@ class EnvConfig(Section):
         description="one k_p (N·m/rad) for every joint, k_d = 2√k_p ([L21] §7: k_p 600, k_d 49); "
         "None: each joint's own gains (the character's, DeepMimic's for the humanoid)",
     )
+    stable_pd: bool = Field(
+        False,
+        description="servos as the stable PD controller of [WL19] Eq. 3 (the stiffness acting on "
+        "the position predicted one physics step ahead); off: only the damping is implicit "
+        "(docs/reproduce.md, 'Stable PD')",
+    )
     imitation: bool = Field(True, description="follow the character's procedural reference motion")
     retarget: bool = Field(
         False,

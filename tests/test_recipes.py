@@ -35,6 +35,8 @@ def test_the_papers_settings_as_the_papers_state_them():
     assert l21.ppo.hidden_sizes == (1024,) * 4 and l21.ppo.value_hidden_sizes == (512, 512)
     assert (l21.ppo.policy_lr, l21.ppo.value_lr, l21.ppo.minibatch_size) == (2e-4, 1e-3, 1024)
     assert l21.curriculum.p_mcmc == 5 and l21.env.skill.rsi == 0.0
+    assert wl19.env.stable_pd and l21.env.stable_pd  # [WL19] Eq. 3; [L21] §7's stable PD
+    assert not ExperimentConfig.model_validate({"character": "walker"}).env.stable_pd
 
 
 def test_a_field_the_config_sets_wins_over_its_recipe_and_the_rest_is_the_default():
@@ -110,3 +112,26 @@ def test_config_show_says_where_every_field_comes_from(tmp_path):
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert bad.returncode == 2 and "recipe" in bad.stdout
+
+
+def test_stable_pd_adds_the_stiffness_times_the_time_step_to_the_damping():
+    """[WL19] Eq. 3: −k_p(q + h q̇ − q̄) is k_p h more damping; the papers' recipes set it."""
+    plain = make_env("humanoid", None, {"gait": "humanoid_walk", "physics_hz": 150})
+    stable = make_env("humanoid", None, {"gait": "humanoid_walk", "physics_hz": 150,
+                                         "stable_pd": True})  # fmt: skip
+    for env in (plain, stable):
+        env.reset(seed=0)
+    kp = plain.model.actuator_gainprm[:, 0]
+    extra = plain.model.actuator_biasprm[:, 2] - stable.model.actuator_biasprm[:, 2]
+    assert np.allclose(extra, kp / 150.0)  # e.g. the knee: k_p 500, h 1/150 s → 3.33 N·m·s/rad
+    assert np.allclose(stable.model.actuator_gainprm[:, 0], kp)  # the stiffness itself unchanged
+    shape = {"leg_length": (0.6, 0.6)}
+    small = make_env("humanoid", shape, {"gait": "humanoid_walk", "physics_hz": 150,
+                                         "stable_pd": True})  # fmt: skip
+    small.reset(seed=0)  # a reshaped body is a stable-PD body too
+    assert np.allclose(small.model.actuator_biasprm[:, 2] + kp / 150.0,
+                       plain.model.actuator_biasprm[:, 2])  # fmt: skip
+    l21 = make_env("humanoid", None, {"gait": "humanoid_walk", "physics_hz": 150,
+                                      "pd_gain": 600.0, "stable_pd": True})  # fmt: skip
+    l21.reset(seed=0)
+    assert np.allclose(l21.model.actuator_biasprm[:, 2], -49.0 - 600.0 / 150.0, atol=0.02)

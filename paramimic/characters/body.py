@@ -9,6 +9,7 @@ volume. Actuators are MuJoCo position servos with damping `kv`, integrated impli
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
@@ -294,8 +295,9 @@ def add_hinge(body: mujoco.MjsBody, joint: Joint) -> None:
 
 
 def add_servos(spec: mujoco.MjSpec, joints) -> None:
-    """A position servo with damping per joint, named as the joint: with the implicit integrator
-    the stable PD controller of [WL19] Eq. 3, clamped to the joint range and torque limit."""
+    """A position servo with damping per joint, named as the joint, clamped to the joint range
+    and torque limit. Under `implicitfast` its damping k_d is integrated implicitly, as [WL19]
+    Eq. 3 treats it; its stiffness acts on the current position (`stable_pd` adds the rest)."""
     for j in joints:
         act = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=j.kp, kv=j.kv_ratio * j.kp)
@@ -394,3 +396,16 @@ def index_character(
 def _sensor_slice(model: mujoco.MjModel, name: str) -> slice:
     s = model.sensor(name)
     return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
+
+
+def stable_pd(model: mujoco.MjModel, timestep: float) -> mujoco.MjModel:
+    """A copy of `model` whose servos are the stable PD controller of [WL19] Eq. 3 (Tan et al.
+    2011; [L21] §7 uses its linear-time form): τ = −k_p(q + h q̇ − q̄) − k_d(q̇ + h q̈).
+
+    The stiffness acting on the predicted position q + h q̇ is a damping of k_p h added to k_d;
+    MuJoCo's `implicitfast` integrates every velocity-dependent actuator force implicitly, so
+    the k_d (q̇ + h q̈) half is its own. The one difference from Eq. 3: MuJoCo treats the added
+    k_p h q̇ implicitly too (M + h(k_d + h k_p) where Eq. 3 has M + h k_d), a little more damped."""
+    model = copy.copy(model)
+    model.actuator_biasprm[:, 2] -= model.actuator_gainprm[:, 0] * timestep
+    return model

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from paramimic.characters import Body, registration
-from paramimic.characters.body import TIMESTEP
+from paramimic.characters.body import TIMESTEP, stable_pd
 from paramimic.characters.dimensions import Reshaper
 from paramimic.characters.ground_fit import fit_ground_contact, lift_to_ground
 from paramimic.config import EnvConfig
@@ -90,17 +90,22 @@ def compiled_body(
     shape: tuple[tuple[str, float], ...],
     timestep: float = TIMESTEP,
     pd_gain: float | None = None,
+    stable: bool = False,
 ) -> Body:
     """F(B̄, b) compiled (by editing the character's one spec) for a physics time step, cached
-    per (character, shape, time step, gain): shared by the envs of a process. `pd_gain`: one
-    k_p for every servo, k_d = 2√k_p ([L21] §7: 600 and 49), on a copy of the model."""
+    per (character, shape, time step, gain, servo): shared by the envs of a process. `pd_gain`:
+    one k_p for every servo, k_d = 2√k_p ([L21] §7: 600 and 49), on a copy of the model;
+    `stable`: the servos as stable PD ([WL19] Eq. 3, `stable_pd`)."""
     body = _reshaper(character)(dict(shape), timestep)
-    if pd_gain is None:
+    if pd_gain is None and not stable:
         return body
     model = copy.copy(body.model)
-    model.actuator_gainprm[:, 0] = pd_gain
-    model.actuator_biasprm[:, 1] = -pd_gain
-    model.actuator_biasprm[:, 2] = -2.0 * np.sqrt(pd_gain)
+    if pd_gain is not None:
+        model.actuator_gainprm[:, 0] = pd_gain
+        model.actuator_biasprm[:, 1] = -pd_gain
+        model.actuator_biasprm[:, 2] = -2.0 * np.sqrt(pd_gain)
+    if stable:
+        model = stable_pd(model, timestep)
     return dataclasses.replace(body, model=model)
 
 
@@ -136,7 +141,7 @@ class EnvCore(gym.Env, ABC):
         self._task = self.task_space.center.copy()
         self.frame_skip = self.config.frame_skip
         self._timestep = 1.0 / self.config.physics_hz  # the body is compiled at this rate
-        self._base = compiled_body(self.definition.name, (), self._timestep, self.config.pd_gain)
+        self._base = self._compiled(())
         self._base_data = mujoco.MjData(self._base.model)
         self.character: Body | None = None
         self._height_adr = 1 if self.definition.planar else 2  # qpos of the root height
@@ -186,10 +191,14 @@ class EnvCore(gym.Env, ABC):
         task[[i for _, i in self._shape_idx]] = 1.0
         return task
 
+    def _compiled(self, shape: tuple[tuple[str, float], ...]) -> Body:
+        c = self.config
+        return compiled_body(self.definition.name, shape, self._timestep, c.pd_gain, c.stable_pd)
+
     def body_for(self, task: np.ndarray) -> Body:
         """The compiled body of the shape part of `task`."""
         shape = tuple((n, round(float(task[i]), 9)) for n, i in self._shape_idx)
-        return compiled_body(self.definition.name, shape, self._timestep, self.config.pd_gain)
+        return self._compiled(shape)
 
     def _load(self, task: np.ndarray) -> bool:
         """Make the body of `task` current (its model and data); False if it already was."""
