@@ -6,7 +6,10 @@ coefficient of variation of the per-parameter returns. On a clip gait (`env.gait
 imitation measures: the body position error (every body against its reference, each relative
 to its own root in its own heading frame, averaged over bodies and control steps, m; on an [L21]
 skill too, against m_a), the root drift (the root's mean horizontal distance from the reference
-root path, m) and the forward speed against the clip's.
+root path, m) and the forward speed against the clip's. On an [L21] skill family, each task
+is performed with the motion the run deals it (m_a = P_θ(a), `Method.performer`) and counts as
+achieved when every measured parameter lands within its σ_task of the goal ([L21] Eq. 8), the
+clip is completed and the character does not fall.
 """
 
 from __future__ import annotations
@@ -35,9 +38,14 @@ class EpisodeResult:
     root_drift: float | None = None  # clip gaits: mean distance from the reference root path
     clip_speed: float | None = None  # clip gaits: the clip's speed on this body (m/s)
     target_speed: float | None = None  # [WL19] gaits: the body's target speed (Table 1, m/s)
+    # [L21] skills: each measured task parameter's |a' − a| / σ_task, and whether the task was
+    # achieved (every one within its σ_task, the clip completed, no fall)
+    task_errors: dict[str, float] | None = None
+    achieved: bool | None = None
 
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
+Motions = Callable[[np.ndarray], "np.ndarray | None"]  # tasks [n, d] -> m_a [n, K, D], or None
 
 
 def deterministic(policy: ActorCritic) -> Act:
@@ -98,10 +106,17 @@ def morph_episode(
 
 
 def run_episodes(
-    act: Act, make_env: Callable[[], ParamEnv], tasks: np.ndarray, num_envs: int, seed: int
+    act: Act,
+    make_env: Callable[[], ParamEnv],
+    tasks: np.ndarray,
+    num_envs: int,
+    seed: int,
+    motions: Motions | None = None,
 ) -> list[EpisodeResult]:
-    """One episode per task, `num_envs` at a time with one batched `act` call per step."""
+    """One episode per task, `num_envs` at a time with one batched `act` call per step;
+    `motions` deals each task the motion it is performed with ([L21]: m_a = P_θ(a))."""
     envs = [make_env() for _ in range(min(num_envs, len(tasks)))]
+    dealt = None if motions is None else motions(np.asarray(tasks))
     rng = np.random.default_rng(seed)
     results: list[EpisodeResult | None] = [None] * len(tasks)
     queue = list(range(len(tasks)))
@@ -113,7 +128,8 @@ def run_episodes(
             slots[j] = None
             return
         k = queue.pop(0)
-        o, _ = envs[j].reset(seed=int(rng.integers(2**31 - 1)), options={"task": tasks[k]})
+        options = {"task": tasks[k]} | ({} if dealt is None else {"motion": dealt[k]})
+        o, _ = envs[j].reset(seed=int(rng.integers(2**31 - 1)), options=options)
         obs[j] = o
         slots[j] = {"k": k, "ret": 0.0, "task": 0.0, "len": 0, "x0": float(envs[j].data.qpos[0])}
         slots[j] |= {"error": 0.0, "drift": 0.0}
@@ -137,12 +153,18 @@ def run_episodes(
                 s["error"] += env.body_error()[0] if bodies else 0.0
                 s["drift"] += env.root_drift() if path else 0.0
             if te or tr:
+                fell = bool(info["fell"] or info["diverged"])  # a completed clip also ends
+                errors = env.task_errors() if getattr(env, "measured", None) else None
+                achieved = None
+                if errors is not None:
+                    done = "skill" in info and info["skill"].completed
+                    achieved = done and not fell and all(e <= 1.0 for e in errors.values())
                 results[s["k"]] = EpisodeResult(
                     tasks[s["k"]],
                     s["ret"],
                     s["task"],
                     s["len"],
-                    bool(info["fell"] or info["diverged"]),  # a completed clip also terminates
+                    fell,
                     float(env.data.qpos[0]) - s["x0"],
                     s["len"] * env.dt,
                     info["skill"].fitness if "skill" in info else None,
@@ -150,6 +172,8 @@ def run_episodes(
                     s["drift"] / s["len"] if path else None,
                     env.clip_speed if path else None,
                     getattr(env, "target_speed", None),
+                    errors,
+                    achieved,
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -181,6 +205,7 @@ def summarize(results: list[EpisodeResult]) -> dict:
             "uniformity": uniformity(rets),
         }
         | _fitness(results)
+        | _achieved(results)
         | _tracking(results, speeds)
         | _on_target(results, speeds)
     )
@@ -203,6 +228,19 @@ def _on_target(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
 def _fitness(results: list[EpisodeResult]) -> dict:
     f = [r.fitness for r in results if r.fitness is not None]
     return {"mean_fitness": float(np.mean(f))} if f else {}
+
+
+def _achieved(results: list[EpisodeResult]) -> dict:
+    """[L21] skills: the share of tasks achieved, and each measured parameter's mean error in
+    its σ_task."""
+    done = [r for r in results if r.achieved is not None]
+    if not done:
+        return {}
+    names = list(done[0].task_errors or {})
+    return {
+        "achieved_share": float(np.mean([r.achieved for r in done])),
+        "task_error_sigmas": {n: float(np.mean([r.task_errors[n] for r in done])) for n in names},
+    }
 
 
 def _tracking(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
@@ -229,14 +267,16 @@ def evaluate(
     grid_dims: tuple[str, str] | None,
     grid_size: int,
     num_envs: int = 8,
+    motions: Motions | None = None,
 ) -> dict:
-    """Random tasks (uniform over A) for the headline numbers, plus a grid over two dims."""
+    """Random tasks (uniform over A) for the headline numbers, plus a grid over two dims;
+    `motions`: what each task is performed with (`run_episodes`)."""
     rng = np.random.default_rng(seed)
     tasks = space.sample(rng, episodes)
-    report = summarize(run_episodes(act, make_env, tasks, num_envs, seed))
+    report = summarize(run_episodes(act, make_env, tasks, num_envs, seed, motions))
     if grid_dims is not None:
         xs, ys, pts = space.grid(grid_dims, grid_size)
-        grid = run_episodes(act, make_env, pts, num_envs, seed + 1)
+        grid = run_episodes(act, make_env, pts, num_envs, seed + 1, motions)
         rets = np.array([r.ret for r in grid]).reshape(grid_size, grid_size)
         report["grid"] = {
             "dims": list(grid_dims),
@@ -256,10 +296,11 @@ def evaluate_config(
     seed: int,
     grid_size: int,
     seconds: float | None = None,
+    motions: Motions | None = None,
 ) -> dict:
     """`evaluate` of the deterministic `policy` on an experiment config's env and task space
     (`cfg`: an ExperimentConfig), episodes of `seconds` (default: the config's horizon), the
-    grid over the config's display dims."""
+    grid over the config's display dims; `motions` as `evaluate`'s (a run's: `Method.performer`)."""
 
     env_cfg = cfg.env.for_evaluation(seconds)
     dims = cfg.display_dims()
@@ -271,4 +312,5 @@ def evaluate_config(
         seed,
         dims if len(dims) == 2 else None,
         grid_size,
+        motions=motions,
     )

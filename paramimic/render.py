@@ -16,7 +16,7 @@ import numpy as np
 
 from paramimic.characters.body import Body
 from paramimic.envs.param_env import ParamEnv
-from paramimic.evaluation import Act, morph_episode
+from paramimic.evaluation import Act, Motions, morph_episode
 
 
 class Camera:
@@ -99,15 +99,20 @@ def render_family(
     width: int = 320,
     height: int = 240,
     seed: int = 0,
+    motions: Motions | None = None,
 ) -> list[np.ndarray]:
     """One policy on each task's body, side by side: frames [height, width·n, 3] at the
     control rate, each panel labelled with its body's shape parameters and its mean forward
-    speed so far (a fall says so). A body whose episode ends stays in its last frame."""
+    speed so far (a fall says so). A body whose episode ends stays in its last frame.
+    `motions`: what each task is performed with ([L21]: m_a = P_θ(a), `Method.performer`)."""
     envs = [make_env() for _ in tasks]
     cams = [Camera(width, height) for _ in tasks]
+    dealt = None if motions is None else motions(np.asarray(tasks))
     obs = np.stack(
         [
-            e.reset(seed=seed + i, options={"task": t})[0]
+            e.reset(
+                seed=seed + i, options={"task": t} | ({} if dealt is None else {"motion": dealt[i]})
+            )[0]
             for i, (e, t) in enumerate(zip(envs, tasks, strict=True))
         ]
     )

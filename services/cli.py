@@ -268,10 +268,12 @@ def evaluate_cmd(
         typer.Option(help="write a PNG heatmap of return over the two displayed task dims"),
     ] = None,
 ) -> None:
-    """Fall %, task achievement, returns and uniformity of a trained controller."""
+    """Fall %, task achievement, returns and uniformity of a trained controller; for an [L21]
+    skill run also the share of tasks achieved, each performed with m_a = P_θ(a)."""
     from paramimic.envs import env_for
     from paramimic.evaluation import deterministic, evaluate
     from paramimic.training import checkpoint
+    from paramimic.training.method import method_for
 
     if episodes < 1 or grid < 1 or num_envs < 1:
         _fail("--episodes, --grid and --num-envs must be positive")
@@ -288,6 +290,7 @@ def evaluate_cmd(
         dims if len(dims) == 2 else None,
         grid,
         num_envs,
+        method_for(cfg).performer(state),  # [L21]: each task performed with m_a = P_θ(a)
     )
     report.update(
         {
@@ -311,6 +314,7 @@ def evaluate_cmd(
         "fall_percent",
         "mean_forward_speed",
         "mean_fitness",  # [L21] skill runs
+        "achieved_share",
         "mean_body_error",  # clip gaits (env.gait)
         "mean_root_drift",
         "speed_ratio",
@@ -410,8 +414,9 @@ def render(
         _fail("--fps must be positive")
     from paramimic.envs import env_for
     from paramimic.evaluation import deterministic
+    from paramimic.training.method import method_for
 
-    cfg, policy, _ = _load_policy(run, max(seconds, 1.0))
+    cfg, policy, state = _load_policy(run, max(seconds, 1.0))
     env = env_for(cfg)
     space = env.task_space
     dims = cfg.display_dims()
@@ -436,7 +441,8 @@ def render(
         frames = render_morph(act, env, tasks[0], bodies, seconds, width, height, seed)
     else:
         maker = lambda: env_for(cfg)  # noqa: E731
-        frames = render_family(act, maker, tasks, seconds, width, height, seed)
+        perform = method_for(cfg).performer(state)  # [L21]: m_a = P_θ(a)
+        frames = render_family(act, maker, tasks, seconds, width, height, seed, perform)
     stride = 1 if fps is None else max(1, round(1.0 / (env.dt * fps)))  # every stride-th frame
     path = write_animation(frames[::stride], out, fps=1.0 / (env.dt * stride))
     n, (h, w) = len(frames[::stride]), frames[0].shape[:2]

@@ -59,10 +59,7 @@ class Session:
         self.kind = method.play_kind
         self.marginal = MarginalValue(self.space, cfg.curriculum.marginal_hidden)
         self.marginal.from_state(state["marginal"])
-        self.curriculum = None
-        if self.kind == "skill":  # P_θ and the bootstrap stage, to deal m_a for "perform"
-            self.curriculum = method.new_curriculum()
-            self.curriculum.from_state(state["curriculum"])
+        self.perform = method.performer(state)  # [L21]: m_a = P_θ(a) for "perform"
         self.shape_names = {n for n, _ in self.env._shape_idx}
         self.units = {p["name"]: p["unit"] for p in cfg.parameters()}
         self.lock = threading.Lock()
@@ -83,9 +80,9 @@ class Session:
             if task is not None:
                 self.task = np.asarray(task, dtype=np.float64)
             options = {"task": self.task}
-            if self.curriculum is not None:
-                motions = self.curriculum.motions_for(self.task[None])
-                options["motion"] = None if motions is None else motions[0]
+            motions = None if self.perform is None else self.perform(self.task[None])
+            if motions is not None:
+                options["motion"] = motions[0]
             self.obs, _ = self.env.reset(seed=int(time.time()), options=options)
             self.fell_at = None
 

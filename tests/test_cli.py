@@ -140,6 +140,9 @@ def test_skill_run_trains_resumes_and_evaluates(tmp_path):
     report = json.loads(out.read_text())
     assert 0.0 <= report["mean_fitness"] <= 1.1 and 0 <= report["fall_percent"] <= 100
     assert report["grid"]["dims"] == ["gravity", "jump_height"]
+    # each task performed with the run's m_a (the proxy or P_θ) and judged by its σ_task
+    assert 0.0 <= report["achieved_share"] <= 1.0
+    assert set(report["task_error_sigmas"]) == {"jump_height"}
 
 
 def test_bad_config_fails_before_anything_starts(tmp_path):

@@ -84,6 +84,24 @@ def test_motions_follow_the_bootstrap_stage():
     assert c.summary().motion_version == 1 and c.summary().stage == "mixed"
 
 
+def test_a_performed_task_gets_p_theta_without_chance():
+    """Evaluation and play perform a task with m_a = P_θ(a) once the mixed stage uses P_θ,
+    with the kNN proxy before, and with m0 in the base stage."""
+    c = make(batch_size=4, episodes_per_param=1)
+    tasks = SPACE.sample(np.random.default_rng(0), 20)
+    c.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0)])
+    c.ingest([episode(1, (0.8, 0.5), 0.9, trace_value=3.0)])
+    assert c.performed_motions(tasks) is None  # base: m0
+    c.update_motion(None, 0, None, "proxy")
+    proxy = c.performed_motions(tasks)
+    assert proxy.shape == (20, *SHAPE) and np.all((proxy >= 1.0) & (proxy <= 3.0))
+    net = ParameterizationNet(SPACE, SHAPE, hidden=(8,), seed=0)
+    net.fit(*c.elite_data(), steps=5)
+    c.update_motion(net.layers(), net.version, net.mse, "mixed")
+    np.testing.assert_allclose(c.performed_motions(tasks), net.predict(tasks), atol=1e-5)
+    np.testing.assert_allclose(c.performed_motions(tasks[:1]), net.predict(tasks[:1]), atol=1e-5)
+
+
 def test_without_motion_parameterization_every_task_imitates_m0():
     """[L21] §7.2's A1: past the base stage the tasks spread over A while m_a stays m0; the
     elites (and so ER) are kept as with the parameterization."""

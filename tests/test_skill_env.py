@@ -418,3 +418,47 @@ def test_without_time_warp_the_reference_runs_in_real_time_whatever_tau_asks():
     assert warped._phi == pytest.approx(5 * np.exp(0.4))
     assert plain._tracking(plain._phi, 0.0)[3] == pytest.approx(1.0)  # r_time: τ = τ̂ = 0
     assert np.all(np.asarray(plain._rec["d"])[:, -1] == 0.0)
+
+
+@pytest.mark.parametrize("sigma", [0.05, 0.5])
+def test_evaluation_counts_a_task_achieved_within_sigma_of_every_measured_goal(sigma):
+    """[L21] family evaluation: a task is achieved when every measured parameter lands within
+    its σ_task of the goal (a constraint unclipped: a' of a zero-width range is always the
+    goal), the clip is completed and the character does not fall."""
+    from paramimic.evaluation import run_episodes, summarize
+
+    measures = {"turn": {"measure": "root_rotation", "axis": "pitch", "unit": "turns",
+                         "sigma": sigma}}  # fmt: skip
+    task = {"gravity": (1.0, 1.0), "turn": (0.0, 0.0)}
+    cfg = EnvConfig(clip="planar_jump", skill={"measures": measures})
+    probe = SkillEnv("walker", task, cfg)
+    zero = np.zeros(probe.nj + 1)
+    # the episodes run_episodes(seed=0) plays: its reset seeds, drawn in task order
+    draw = np.random.default_rng(0)
+    turned = []
+    for _ in range(2):
+        rows = _run(probe, lambda t: zero, {"task": [1.0, 0.0]}, int(draw.integers(2**31 - 1)))
+        info = rows[-1][3]
+        assert info["skill"].completed and not info["fell"]
+        assert info["skill"].achieved[1] == 0.0  # hindsight a' is clipped into the range
+        turned.append(probe.measure(probe.measured[0]))
+        assert probe.task_errors() == {"turn": pytest.approx(turned[-1] / sigma)}
+    assert max(turned) > 0.05  # the untrained torso pitches
+
+    seen = []
+    results = run_episodes(
+        lambda obs: np.tile(zero, (len(obs), 1)),
+        lambda: SkillEnv("walker", task, cfg),
+        np.array([[1.0, 0.0]] * 2),
+        num_envs=2,
+        seed=0,
+        motions=lambda tasks: seen.append(tasks.copy()) or None,
+    )
+    assert len(seen) == 1 and seen[0].shape == (2, 2)  # one deal for every task
+    errors = [t / sigma for t in turned]
+    for r, e in zip(results, errors, strict=True):
+        assert r.task_errors == {"turn": pytest.approx(e)}
+        assert r.achieved == (e <= 1.0)
+    report = summarize(results)
+    assert report["achieved_share"] == np.mean([e <= 1.0 for e in errors])
+    assert report["task_error_sigmas"]["turn"] == pytest.approx(np.mean(errors))

@@ -207,6 +207,24 @@ class SkillCurriculum(AdaptiveCurriculum):
                 out[use_net] = numpy_forward(self.motion_layers, x).reshape(-1, *self.trace_shape)
         return out
 
+    def performed_motions(self, tasks: np.ndarray) -> np.ndarray | None:
+        """m_a for performing each task (evaluation, play), chosen without chance: P_θ(a) once
+        the bootstrap's mixed stage uses it, the kNN proxy (Eq. 14) in the proxy stage, None
+        (m0) in the base stage or without motion parameterization."""
+        if self.stage == "base" or len(self.elites) == 0 or not self.sc.motion_parameterization:
+            return None
+        tasks = np.atleast_2d(np.asarray(tasks, np.float64))
+        if self.stage == "mixed" and self.motion_layers is not None:
+            x = self.space.scaled(tasks)
+            return numpy_forward(self.motion_layers, x).reshape(-1, *self.trace_shape)
+        sc = self.sc
+        return np.stack(
+            [
+                knn_proxy(self.elites, self.traces.__getitem__, a, sc.knn_k, sc.knn_sigma)
+                for a in tasks
+            ]
+        )
+
     # --- what finished episodes report ---------------------------------------------------------
 
     def ingest(self, episodes: Iterable[EpisodeReport]) -> int:

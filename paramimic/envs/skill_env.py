@@ -320,6 +320,15 @@ class SkillEnv(EnvCore):
         traj = self.episode_trajectory() if traj is None else traj
         return t.measure.value(traj, self._reference_si[t.name])
 
+    def task_errors(self) -> dict[str, float]:
+        """Each measured task parameter's distance from its goal on the episode so far, in its
+        σ_task ([L21] Eq. 8): |measure − a| / σ (unclipped, so a constraint's miss shows)."""
+        traj = self.episode_trajectory()
+        return {
+            t.name: abs(self.measure(t, traj) - float(self._task[t.index])) / t.sigma
+            for t in self.measured
+        }
+
     def _task_rewards(self, completed: bool) -> tuple[float | None, float | None]:
         """r_task of Eq. 8 for this step: over the continuous parameters in their window, and over
         the spike parameters whose event happens now (None where there is none)."""

@@ -16,7 +16,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -26,6 +26,9 @@ from paramimic.curriculum.skill import SkillCurriculum
 from paramimic.envs import env_for
 from paramimic.task_space import TaskSpace
 from paramimic.training.curriculum import Curriculum, MotionCurriculum
+
+if TYPE_CHECKING:  # evaluation loads torch; the sampler actor imports this module without it
+    from paramimic.evaluation import Motions
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,11 @@ class Method(ABC):
         """Work of this method after each PPO/V̄ update (`trainer`: the Trainer); returns
         metrics to add to the iteration's."""
         return {}
+
+    def performer(self, state: dict) -> Motions | None:
+        """How a trained run of this method performs a task (evaluation, play): tasks [n, d] ->
+        the motions to reset with (None: the env's own reference). `state`: a checkpoint's."""
+        return None
 
 
 class WL19(Method):
@@ -176,6 +184,13 @@ class L21(Method):
             ),
             "bootstrap": Bootstrap(sc),
         }  # fmt: skip
+
+    def performer(self, state: dict) -> Motions | None:
+        """m_a = P_θ(a) of the checkpoint's curriculum (the kNN proxy, or m0, before it has
+        one): `SkillCurriculum.performed_motions`."""
+        curriculum: MotionCurriculum = self.new_curriculum()  # type: ignore[assignment]
+        curriculum.from_state(state["curriculum"])
+        return curriculum.performed_motions
 
     def after_update(self, trainer, metrics: dict) -> dict:
         """Fit P_θ on the elites every `p_every` updates, advance the bootstrap stage, and send
