@@ -202,18 +202,21 @@ def table() -> str:
             )
     body = tabulate(lines, headers=header, tablefmt="github", disable_numparse=True)
     body += "\n\n" + ("\n".join(verdicts) if verdicts else "No family has a judged row yet.")
-    body += k_comparison(_rows())
+    pairs = k_pairs(_rows())
+    body += k_comparison(pairs)
+    summary = {"pairs": pairs, "uniform_target": UNIFORM_TARGET}
+    (RESULTS / "humanoid_families.json").write_text(json.dumps(summary, indent=1))
     text = DOCS.read_text()
     start, end = text.index(MARK[0]) + len(MARK[0]), text.index(MARK[1])
     DOCS.write_text(text[:start] + "\n" + body + "\n" + text[end:])
     return body
 
 
-def k_comparison(rows: dict[str, list[dict]]) -> str:
+def k_pairs(rows: dict[str, list[dict]]) -> list[dict]:
     """[WL19] Fig. 6 on a humanoid family: its adaptive sampling (the config's k) against its
     uniform arm (`--set curriculum.k=0 --set name=<family>_uniform`), the same seed at the same
     env steps (within 2 %). Target: the worst-decile return >= UNIFORM_TARGET x uniform's."""
-    lines = []
+    out = []
     for config, runs in sorted(rows.items()):
         uniform = rows.get(config + UNIFORM)
         for r in runs if uniform else []:
@@ -223,14 +226,26 @@ def k_comparison(rows: dict[str, list[dict]]) -> str:
                 continue
             a, u = r["report"], same[0]["report"]
             ratio = a["worst_decile_return"] / u["worst_decile_return"]
-            lines.append([
-                config, r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
-                f"{a['worst_decile_return']:.1f}", f"{u['worst_decile_return']:.1f}",
-                f"{ratio:.2f}x", f"{a['uniformity']['coefficient_of_variation']:.3f}",
-                f"{u['uniformity']['coefficient_of_variation']:.3f}",
-                f"{a['fall_percent']:.1f} % / {u['fall_percent']:.1f} %",
-                "yes" if ratio >= UNIFORM_TARGET else "no",
-            ])  # fmt: skip
+            out.append({
+                "config": config, "seed": r["train_seed"], "env_steps": r["env_steps"],
+                "worst_decile": [a["worst_decile_return"], u["worst_decile_return"]],
+                "cv": [a["uniformity"]["coefficient_of_variation"],
+                       u["uniformity"]["coefficient_of_variation"]],
+                "fall_percent": [a["fall_percent"], u["fall_percent"]],
+                "ratio": ratio, "met": ratio >= UNIFORM_TARGET,
+            })  # fmt: skip
+    return out
+
+
+def k_comparison(pairs: list[dict]) -> str:
+    """The pairs of `k_pairs` as a table (empty without any)."""
+    lines = [
+        [p["config"], p["seed"], f"{p['env_steps'] / 1e6:.2f}M", f"{p['worst_decile'][0]:.1f}",
+         f"{p['worst_decile'][1]:.1f}", f"{p['ratio']:.2f}x", f"{p['cv'][0]:.3f}",
+         f"{p['cv'][1]:.3f}", f"{p['fall_percent'][0]:.1f} % / {p['fall_percent'][1]:.1f} %",
+         "yes" if p["met"] else "no"]
+        for p in pairs
+    ]  # fmt: skip
     if not lines:
         return ""
     header = ["family", "seed", "env steps", "worst decile (adaptive)", "worst decile (uniform)",

@@ -363,6 +363,8 @@ def _humanoid_rows() -> list[dict]:
             if r["env_steps"] >= seeds.get(r["train_seed"], {"env_steps": -1})["env_steps"]:
                 seeds[r["train_seed"]] = r
     for config, seeds in sorted(families.items()):
+        if config.endswith("_uniform"):  # an arm of the k comparison below, not a target
+            continue
         t = next(iter(seeds.values()))["target"]
         rows.append({
             "target": f"{config}: <= {t['fall_percent']:g} % falls in 30 s on 300 held-out "
@@ -379,6 +381,58 @@ def _humanoid_rows() -> list[dict]:
             "met": len(seeds) >= 3 and all(x["met"] for x in seeds.values()),
             "command": f"paramimic train configs/{config}.yaml --seed N, then "
                        "python benchmarks/humanoid_families.py eval RUN_DIR",
+        })  # fmt: skip
+    return rows + _humanoid_k_rows() + _skill_family_rows()
+
+
+def _humanoid_k_rows() -> list[dict]:
+    """[WL19] Fig. 6 on a humanoid family: adaptive against its uniform arm, per seed
+    (benchmarks/humanoid_families.py `table` -> humanoid_families/humanoid_families.json)."""
+    path = RESULTS.parent / "humanoid_families" / "humanoid_families.json"
+    pairs = json.loads(path.read_text())["pairs"] if path.exists() else []
+    rows = []
+    for config in sorted({p["config"] for p in pairs}):
+        mine = sorted((p for p in pairs if p["config"] == config), key=lambda p: p["seed"])
+        rows.append({
+            "target": f"{config}: adaptive sampling's worst-decile return >= 1.2x its uniform "
+                      "arm's (k = 0) at equal budget, every seed (docs/humanoid_families.md)",
+            "seeds": [p["seed"] for p in mine],
+            "measured": {"ratio": [p["ratio"] for p in mine],
+                         "cv": [p["cv"] for p in mine]},
+            "met": len(mine) >= 3 and all(p["met"] for p in mine),
+            "command": f"paramimic train configs/{config}.yaml --seed N (and --set "
+                       f"curriculum.k=0 --set name={config}_uniform), then python "
+                       "benchmarks/humanoid_families.py eval RUN_DIR",
+        })  # fmt: skip
+    return rows
+
+
+def _skill_family_rows() -> list[dict]:
+    """[L21] skill families trained as service runs: ER within 30M env steps and against
+    uniform sampling at equal episodes, per seed (benchmarks/skill_family.py `table`)."""
+    path = RESULTS.parent / "skill_family" / "skill_family.json"
+    result = json.loads(path.read_text()) if path.exists() else {"runs": [], "pairs": []}
+    rows = []
+    runs = [r for r in result["runs"] if r["sampling"] == "curriculum"]
+    for config in sorted({r["config"] for r in runs}):
+        mine = sorted((r for r in runs if r["config"] == config), key=lambda r: r["train_seed"])
+        pairs = [p for p in result["pairs"] if p["config"] == config]
+        rows.append({
+            "target": f"{config}: the curriculum reaches refinement and ER >= 0.5 within 30M "
+                      "env steps, and >= 1.5x uniform's ER at equal episodes, every seed "
+                      "(docs/humanoid_families.md)",
+            "seeds": [r["train_seed"] for r in mine],
+            "measured": {
+                "explored_ratio": [r["explored_ratio"] for r in mine],
+                "env_steps": [r["env_steps"] for r in mine],
+                "achieved_share": [r["report"].get("achieved_share") for r in mine],
+                "ratio_to_uniform": [p["ratio"] for p in pairs],
+            },
+            "met": len(mine) >= 3 and all(r["met"] for r in mine) and len(pairs) >= 3
+            and all(p["met"] for p in pairs),
+            "command": f"paramimic train configs/{config}.yaml --seed N (and --set "
+                       "curriculum.skill.sampling=uniform), then python "
+                       "benchmarks/skill_family.py eval RUN_DIR",
         })  # fmt: skip
     return rows
 
