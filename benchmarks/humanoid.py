@@ -220,6 +220,7 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
     from paramimic.evaluation import evaluate_config
     from services.launch.redis_server import EmbeddedRedis
     from services.launch.stack import ray_stack
+    from services.learner.cluster import start_private
 
     overrides = {}
     for item in sets:
@@ -230,8 +231,7 @@ def screen(config: str, sets: list[str], budget: float, seed: int, episodes: int
     label = ",".join(sets) or "as shipped"
     cfg = load_config(ROOT / config, overrides | {"train.seed": seed, "actors.num_actors": 2})
     torch.manual_seed(seed)
-    ray.init(address="local", num_cpus=2, include_dashboard=False, _node_ip_address="127.0.0.1",
-             log_to_driver=False)  # fmt: skip
+    start_private(num_cpus=2)  # a cluster of its own, as `paramimic train` starts
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as redis:
             run = Path(tmp) / "run"

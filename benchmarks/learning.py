@@ -72,9 +72,9 @@ def _train_ours(
 
         from services.launch.redis_server import EmbeddedRedis
         from services.launch.stack import ray_stack
+        from services.learner.cluster import start_private
 
-        ray.init(address="local", include_dashboard=False, _node_ip_address="127.0.0.1",
-                 log_to_driver=False)  # fmt: skip
+        start_private()  # a cluster of its own, as `paramimic train` starts
         try:
             with (
                 EmbeddedRedis(run_dir / "redis") as server,

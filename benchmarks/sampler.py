@@ -37,6 +37,7 @@ import ray
 
 from paramimic.config import load_config
 from services.launch.redis_server import EmbeddedRedis
+from services.learner.cluster import start_private
 from services.sampler.actor import start_sampler
 from services.sampler.service import SamplerService
 
@@ -234,8 +235,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/sampler/sampler.json")
     args = ap.parse_args()
     result: dict = {"cpus": os.cpu_count(), "config": CONFIG}
-    ray.init(address="local", include_dashboard=False, _node_ip_address="127.0.0.1",
-             log_to_driver=False)  # fmt: skip
+    start_private()  # a cluster of its own, as `paramimic train` starts
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as server:
             result["sampler"] = {

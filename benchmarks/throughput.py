@@ -41,6 +41,7 @@ from paramimic.envs import env_for
 from paramimic.rl.ppo import update_dtype
 from services.launch.redis_server import EmbeddedRedis
 from services.launch.stack import ray_stack
+from services.learner.cluster import start_private
 
 warnings.filterwarnings("ignore")
 ROOT = Path(__file__).resolve().parent.parent
@@ -221,13 +222,7 @@ def main() -> None:
     rows: dict[str, dict] = {}
     if not args.peers_only:
         rows["a_raw_mj_step"] = {"steps_per_s": raw_steps_per_s(cfg)}
-    ray.init(
-        address="local",  # a cluster of its own, never the one Ray's temp dir names
-        num_cpus=os.cpu_count(),
-        include_dashboard=False,
-        _node_ip_address="127.0.0.1",
-        log_to_driver=False,
-    )
+    start_private(num_cpus=os.cpu_count())  # a cluster of its own, as `paramimic train` starts
     try:
         with tempfile.TemporaryDirectory() as tmp, EmbeddedRedis(Path(tmp)) as redis_server:
             url = redis_server.url
