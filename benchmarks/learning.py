@@ -398,7 +398,8 @@ def _humanoid_k_rows() -> list[dict]:
                       "arm's (k = 0) at equal budget, every seed (docs/humanoid_families.md)",
             "seeds": [p["seed"] for p in mine],
             "measured": {"ratio": [p["ratio"] for p in mine],
-                         "cv": [p["cv"] for p in mine]},
+                         "cv_adaptive": [p["cv"][0] for p in mine],
+                         "cv_uniform": [p["cv"][1] for p in mine]},
             "met": len(mine) >= 3 and all(p["met"] for p in mine),
             "command": f"paramimic train configs/{config}.yaml --seed N (and --set "
                        f"curriculum.k=0 --set name={config}_uniform), then python "
