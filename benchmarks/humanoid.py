@@ -99,6 +99,34 @@ def training_wall_clock(run: Path, up_to: int | None = None) -> float:
     return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
 
 
+def judged(r: dict, budget: int | None) -> bool | None:
+    """An evaluation's verdict: met, missed (the run had no iteration left within `budget`),
+    or None while its run stopped short of the budget (ended with a session, to be resumed)."""
+    from paramimic.config import load_config
+
+    if r["met"] or budget is None:
+        return bool(r["met"])
+    num_steps = load_config(ROOT / "configs" / f"{r['config']}.yaml").ppo.num_steps
+    return False if r["env_steps"] + num_steps > budget else None
+
+
+def seed_verdict(status: dict[int, bool | None], seeds_needed: int = 3) -> str:
+    """The 3-seed verdict from each seed's judged evaluation (`judged`): missed as soon as one
+    seed misses (no other seed can make it met), met once `seeds_needed` seeds all meet it."""
+    missing = sorted(s for s, ok in status.items() if ok is False)
+    if missing:
+        verb = "misses" if len(missing) == 1 else "miss"
+        return f"missed (seed {', '.join(map(str, missing))} {verb})"
+    met = sorted(s for s, ok in status.items() if ok)
+    if len(met) >= seeds_needed:
+        return "met"
+    short = sorted(s for s, ok in status.items() if ok is None)
+    return (
+        f"not yet judged ({len(met)} of {seeds_needed} seeds meeting it"
+        + (f"; seed {', '.join(map(str, short))} stopped short of its budget" if short else "")
+        + ")"
+    )
+
 def load_run(run: Path):
     """(checkpoint state, config, policy in eval mode) of a run directory or checkpoint."""
     from paramimic.training import checkpoint
@@ -361,13 +389,20 @@ def _skills() -> dict:
         }
         out.setdefault(r["config"], {"clip": r["clip"], "target": r["target"], "runs": []})
         out[r["config"]]["runs"].append(keep)  # fmt: skip
-    for config in out.values():
+    for name, config in out.items():
         latest: dict[int, dict] = {}
         for r in sorted(config["runs"], key=lambda r: r["env_steps"]):
             latest[r["train_seed"]] = r
         config["seeds"] = sorted(latest)
-        config["met"] = len(latest) >= 3 and all(r["met"] for r in latest.values())
-        config["mean_success"] = float(np.mean([r["success_share"] for r in latest.values()]))
+        status = {s: judged(r | {"config": name}, config["target"]["env_steps"])
+                  for s, r in latest.items()}  # fmt: skip
+        config["status"] = {str(s): v for s, v in status.items()}
+        config["verdict"] = seed_verdict(status)
+        config["met"] = config["verdict"] == "met"
+        done = [r for s, r in latest.items() if status[s] is not None]  # runs that ended
+        config["mean_success"] = (
+            float(np.mean([r["success_share"] for r in done])) if done else None
+        )
     return out
 
 
@@ -385,10 +420,14 @@ def _skills_table(skills: dict) -> str:
                 f"{r['mean_body_error']:.3f}", f"{100 * t['share']:.0f} % ({t['kind']})",
                 "yes" if r["met"] else "no",
             ])  # fmt: skip
-        verdict = "met" if c["met"] else "not yet met"
+        mean = (
+            f"mean success of the latest of each ended run {100 * c['mean_success']:.0f} %"
+            if c["mean_success"] is not None
+            else "no run has ended"
+        )
         verdicts.append(
-            f"- {config}: seeds {c['seeds']} evaluated; mean success of the latest "
-            f"{100 * c['mean_success']:.0f} %; the 3-seed target is {verdict}."
+            f"- {config}: seeds {c['seeds']} evaluated; {mean}; the 3-seed target is "
+            f"{c['verdict']}."
         )
     return _table(header, lines) + "\n\n" + "\n".join(verdicts)
 
@@ -467,16 +506,14 @@ def _write_docs(rows: dict[str, list]) -> None:
     verdicts = []
     for config, runs in sorted(rows.items()):
         seeds = sorted({r["train_seed"] for r in runs})
-        met = [
-            s
-            for s in seeds
-            if max((r for r in runs if r["train_seed"] == s), key=lambda r: r["env_steps"])["met"]
-        ]
-        verdict = "met" if len(seeds) >= 3 and len(met) == len(seeds) else "not yet met"
-        latest = [
-            max((r for r in runs if r["train_seed"] == s), key=lambda r: r["env_steps"])["report"]
-            for s in seeds
-        ]
+        last = {s: max((r for r in runs if r["train_seed"] == s), key=lambda r: r["env_steps"])
+                for s in seeds}  # fmt: skip
+        met = [s for s in seeds if last[s]["met"]]
+        verdict = seed_verdict(
+            {s: judged(r | {"config": config}, r.get("target", {}).get("env_steps"))
+             for s, r in last.items()}  # fmt: skip
+        )
+        latest = [last[s]["report"] for s in seeds]
         mean = {k: float(np.mean([r[k] for r in latest])) for k in
                 ("fall_percent", "mean_body_error", "speed_ratio", "mean_root_drift")}  # fmt: skip
         verdicts.append(

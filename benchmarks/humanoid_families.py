@@ -47,7 +47,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from humanoid import training_wall_clock  # benchmarks/humanoid.py, beside this script
+
+# benchmarks/humanoid.py, beside this script
+from humanoid import judged, seed_verdict, training_wall_clock
 from tabulate import tabulate
 
 from paramimic.config import load_config
@@ -194,7 +196,9 @@ def table() -> str:
                 latest[r["train_seed"]] = r
         if config in TARGETS:
             met = [s for s, r in latest.items() if r["met"]]
-            verdict = "met" if len(latest) >= 3 and len(met) == len(latest) else "not yet met"
+            verdict = seed_verdict(
+                {s: judged(r, r["target"]["env_steps"]) for s, r in latest.items()}
+            )
             falls = np.mean([r["report"]["fall_percent"] for r in latest.values()])
             verdicts.append(
                 f"- {config}: seeds {sorted(latest)} evaluated, {len(met)} meeting the target; "
