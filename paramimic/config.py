@@ -280,9 +280,10 @@ class EnvConfig(Section):
         "stall_speed_ratio; evaluation runs without it)",
     )  # fmt: skip
     deviation_limit: float | None = Field(
-        None, gt=0, description="a clip gait's early termination: end the episode when a body "
-        "is farther than this (m) from its reference position (both relative to the root, in "
-        "the root's heading frame) or the root's height is; a training device like "
+        None, gt=0, description="a clip's early termination (a clip gait's or an [L21] "
+        "skill's): end the episode when a body is farther than this (m) from its reference "
+        "position (both relative to the root, in the root's heading frame) or the root's "
+        "height is; a training device like "
         "stall_speed_ratio, reported as `deviated`, never a fall (evaluation runs without it)",
     )  # fmt: skip
     phase_sampling: Literal["uniform", "failures"] = Field(

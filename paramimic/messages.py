@@ -134,7 +134,7 @@ class EpisodeReport:
     reward_terms: dict[str, float]  # per-term sums over the episode
     # the env ended it before its time limit (a fall, a stall, off course, a divergence, ...)
     ended_early: bool
-    # a clip gait's episode ended by the training rule `env.deviation_limit` (never a fall)
+    # ended by the training rule `env.deviation_limit` (a clip gait, a skill; never a fall)
     deviated: bool = False
     skill: SkillOutcome | None = None  # [L21] episodes
     tags: DealTags = field(default_factory=DealTags)

@@ -105,7 +105,6 @@ def test_a_new_method_is_one_class_and_one_registration(toy, tmp_path):
         ({"env": {"clip": "planar_jump"}, "task": {"target_velocity": [1, 1]}}, "gait goal"),
         ({"env": {"clip": "planar_jump"}, "curriculum": {"widen": {}}}, "curriculum.widen:"),
         ({"env": {"clip": "planar_jump", "retarget": True}}, "env.retarget:"),
-        ({"env": {"clip": "planar_jump", "deviation_limit": 0.5}}, "env.deviation_limit:"),
         ({"env": {"deviation_limit": 0.5}}, "env.deviation_limit:"),
     ],
 )

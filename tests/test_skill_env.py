@@ -462,3 +462,35 @@ def test_evaluation_counts_a_task_achieved_within_sigma_of_every_measured_goal(s
     report = summarize(results)
     assert report["achieved_share"] == np.mean([e <= 1.0 for e in errors])
     assert report["task_error_sigmas"]["turn"] == pytest.approx(np.mean(errors))
+
+
+def test_a_skill_that_leaves_its_reference_deviates_not_falls_and_evaluation_runs_on():
+    """env.deviation_limit on an [L21] skill, as on a clip gait: a body farther than the limit
+    from m_a's at φ (root-relative, heading frame), or the root's height, ends the episode as a
+    deviation (never a fall, no completed clip, no fitness); evaluation runs without the rule."""
+    config = {"clip": "humanoid_jump", "frame_skip": 20, "init_noise": 0.0,
+              "deviation_limit": 0.3}  # fmt: skip
+    env = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, config)
+    zero = np.zeros(env.action_space.shape)
+    env.reset(seed=0)
+    assert not env._deviated()  # on the reference at the start
+    shoulder = env.model.joint("right_shoulder_x").qposadr[0]
+    env.data.qpos[shoulder] += 2.5  # the right arm swung far up: the wrist ~0.9 m away
+    mujoco.mj_kinematics(env.model, env.data)
+    assert env.body_error()[1] > 0.3 and env._deviated()
+    # the root lifted 0.4 m, every body where the clip has it relative to the root: the height
+    env.reset(seed=0)
+    env.data.qpos[2] += 0.4
+    mujoco.mj_kinematics(env.model, env.data)
+    assert env.body_error()[1] < 0.3 and env._deviated()
+    env.reset(seed=0)
+    env.data.qpos[shoulder] += 2.5
+    env.data.qvel[:] = 0.0
+    _, _, term, trunc, info = env.step(zero)
+    assert term and not trunc and info["deviated"] and not info["fell"]
+    assert info["skill"].fitness == 0.0 and not info["skill"].completed
+    evaluation = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, env.config.for_evaluation())
+    evaluation.reset(seed=0)
+    evaluation.data.qpos[shoulder] += 2.5
+    evaluation.data.qvel[:] = 0.0
+    assert not evaluation.step(zero)[4]["deviated"]

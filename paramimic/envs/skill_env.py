@@ -226,6 +226,7 @@ class SkillEnv(EnvCore):
         self._steps = 0
         # the root's x offset from m_a's (0 at the clip's start): the COM reference follows it
         self._x0 = float(d.qpos[0]) - float(at(self._qa, start)[0] - self._qa[0, 0])
+        self._z0 = float(d.qpos[height] - at(self._qa, start)[height])  # the lift at reset
         self._watch_stability()
         self._rec: dict[str, list] = {k: [] for k in ("phi", "d", "pose", "vel", "ee", "slide")}
         self._path = EpisodePath(m, c, self._energy, self._contact0)
@@ -262,33 +263,49 @@ class SkillEnv(EnvCore):
         obs = self._observe()
         self._last_obs = obs
         fell = self.fall_contact()
-        completed = phi_next >= self.length and not fell and self._held is None
+        deviated = not fell and self._deviated()
+        completed = phi_next >= self.length and not (fell or deviated) and self._held is None
         r_continuous, r_spike = self._task_rewards(completed)
         reward = l21_reward(r_track, r_continuous or 0.0, self._w_tracking, self._w_continuous)
         spike = 0.0 if r_spike is None else self._w_spike * r_spike  # Eq. 5, paid at once
         r_task = r_continuous if r_continuous is not None else r_spike
         terms.append(0.0 if r_task is None else r_task)
         if self._held is not None or completed and self._hold_steps:  # standing after the end
-            return self._hold(obs, reward + spike, spike, dphi, terms, fell, completed)
-        if fell or completed or self._steps >= self._max_steps or self._timed_out():
-            info = self._info(dphi, spike, terms, fell=fell)
-            return self._end(obs, reward + spike, info, fell or completed, completed)
+            return self._hold(obs, reward + spike, spike, dphi, terms, fell, deviated, completed)
+        ends = fell or deviated or completed
+        if ends or self._steps >= self._max_steps or self._timed_out():
+            info = self._info(dphi, spike, terms, fell=fell, deviated=deviated)
+            return self._end(obs, reward + spike, info, ends, completed)
         info = self._info(dphi, spike, terms, fell=False)
         return obs, reward + spike, False, False, info
 
-    def _hold(self, obs, reward, spike, dphi, terms, fell, completed):
+    def _hold(self, obs, reward, spike, dphi, terms, fell, deviated, completed):
         """`hold_seconds` after the clip's end: the summary is the clip end's; the episode ends
-        on a fall or when the time is up, reporting whether the body stood the whole time (a
-        training time limit that cuts the stand short truncates it: not `held`)."""
+        on a fall (or a deviation, in training) or when the time is up, reporting whether the
+        body stood the whole time (a training time limit that cuts the stand short truncates
+        it: not `held`)."""
         if completed:
             self._held, self._hold_left = self._summary(True), self._hold_steps
         self._hold_left -= 0 if completed else 1
-        info = self._info(dphi, spike, terms, fell=fell)
-        cut = not fell and self._hold_left > 0 and self._timed_out()
-        if fell or cut or self._hold_left <= 0 or self._steps >= self._max_steps:
-            info["skill"] = self._held.with_held(not (fell or cut))
+        info = self._info(dphi, spike, terms, fell=fell, deviated=deviated)
+        stop = fell or deviated
+        cut = not stop and self._hold_left > 0 and self._timed_out()
+        if stop or cut or self._hold_left <= 0 or self._steps >= self._max_steps:
+            info["skill"] = self._held.with_held(not (stop or cut))
             return obs, reward, not cut, cut, info
         return obs, reward, False, False, info
+
+    def _deviated(self) -> bool:
+        """`deviation_limit` (a training rule, as on clip gaits): a body (relative to the root,
+        in its heading frame) or the root's height farther than that from m_a's at φ (after
+        the clip's end, its last pose)."""
+        limit = self.config.deviation_limit
+        if limit is None:
+            return False
+        _, worst = self.body_error()
+        h = 1 if self.root_nq == self.root_nv else 2
+        height = float(self.data.qpos[h]) - at(self._qa, self._phi)[h] - self._z0
+        return worst > limit or abs(height) > limit
 
     @property
     def horizon_seconds(self) -> float:
@@ -445,9 +462,10 @@ class SkillEnv(EnvCore):
         info["skill"] = self._summary(completed and not info["diverged"])
         return obs, reward, terminated, not terminated, info
 
-    def _info(self, dphi, spike, terms, fell, diverged=False) -> StepInfo:
+    def _info(self, dphi, spike, terms, fell, diverged=False, deviated=False) -> StepInfo:
         return StepInfo(
-            task=self._task.copy(), fell=fell, diverged=diverged, dphi=dphi, reward_spike=spike,
+            task=self._task.copy(), fell=fell, diverged=diverged, deviated=deviated, dphi=dphi,
+            reward_spike=spike,
             reward_terms=dict(zip(SKILL_TERMS, terms, strict=True)),
         )  # fmt: skip
 

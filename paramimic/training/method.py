@@ -124,7 +124,10 @@ class WL19(Method):
                 f"(a looping clip) or env.clip (one of {clips})"
             )
         if cfg.env.deviation_limit is not None and cfg.env.gait is None:
-            out.append("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
+            out.append(
+                "env.deviation_limit: ends episodes that leave their reference: a clip gait's "
+                "(env.gait) or a skill's (env.clip)"
+            )
         return out
 
     def new_curriculum(self, clip: dict | None = None) -> Curriculum:
@@ -154,8 +157,6 @@ class L21(Method):
             )
         if "target_velocity" in cfg.task:
             out.append("task.target_velocity: a [WL19] gait goal; the skill env has none")
-        if cfg.env.deviation_limit is not None:
-            out.append("env.deviation_limit: ends episodes that leave a clip gait (env.gait)")
         return out
 
     @cached_property
