@@ -287,8 +287,9 @@ class EnvConfig(Section):
         "stall_speed_ratio, reported as `deviated`, never a fall (evaluation runs without it)",
     )  # fmt: skip
     phase_sampling: Literal["uniform", "failures"] = Field(
-        "uniform", description="where reference state initialisation starts a cycle: uniform "
-        "phases ([WL19] Alg. 1), or phases drawn where episodes fail "
+        "uniform", description="where reference state initialisation starts a cycle (a clip "
+        "gait) or a skill's RSI episode (env.skill.rsi): uniform phases ([WL19] Alg. 1), or "
+        "phases drawn where episodes fail "
         "(paramimic/motion/phase.py; evaluation always draws uniform phases)",
     )  # fmt: skip
     phase_bins: int = Field(10, ge=1, description="phase_sampling failures: bins per cycle")

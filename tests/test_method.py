@@ -106,6 +106,7 @@ def test_a_new_method_is_one_class_and_one_registration(toy, tmp_path):
         ({"env": {"clip": "planar_jump"}, "curriculum": {"widen": {}}}, "curriculum.widen:"),
         ({"env": {"clip": "planar_jump", "retarget": True}}, "env.retarget:"),
         ({"env": {"deviation_limit": 0.5}}, "env.deviation_limit:"),
+        ({"env": {"clip": "planar_jump", "phase_sampling": "failures"}}, "env.phase_sampling:"),
     ],
 )
 def test_each_method_refuses_what_it_cannot_run_naming_the_field(data, reason):

@@ -494,3 +494,35 @@ def test_a_skill_that_leaves_its_reference_deviates_not_falls_and_evaluation_run
     evaluation.data.qpos[shoulder] += 2.5
     evaluation.data.qvel[:] = 0.0
     assert not evaluation.step(zero)[4]["deviated"]
+
+
+def test_rsi_start_phases_follow_where_a_skills_episodes_fail():
+    """env.phase_sampling: failures on a skill's RSI: the clip's phase in bins (a line, not a
+    cycle), each bin's failure rate learned from the RSI episodes that started there."""
+    config = {"clip": "humanoid_backflip", "frame_skip": 20, "phase_sampling": "failures",
+              "phase_bins": 4, "phase_alpha": 0.5, "skill": {"rsi": 1.0}}  # fmt: skip
+    env = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, config)
+    sampler = env._phases
+    assert sampler is not None and not sampler.wrap
+    env.reset(seed=0)
+    start = env._start
+    assert env._phi == pytest.approx(start * (env.length - 1.0))
+    while True:  # zero actions: the humanoid falls before the backflip's end
+        *_, term, trunc, info = env.step(np.zeros(env.action_space.shape))
+        if term or trunc:
+            break
+    assert info["fell"]
+    expected = np.zeros(4)
+    expected[int(start * 4)] = 0.5  # EMA 0 -> 0.5 in the bin it started in
+    assert sampler.failure == pytest.approx(expected)
+    sampler.failure[:] = [0.0, 0.0, 0.0, 1.0]  # only the clip's last quarter fails
+    # smoothed over the line: [0, 0, 0.25, 0.75] / 1.0, times 0.9, plus 0.025 each
+    assert sampler.probabilities() == pytest.approx([0.025, 0.025, 0.25, 0.7])
+    starts = []
+    for seed in range(200):
+        env.reset(seed=seed)
+        starts.append(env._phi / (env.length - 1.0))
+    counts = np.bincount((np.asarray(starts) * 4).astype(int), minlength=4) / len(starts)
+    assert counts == pytest.approx([0.025, 0.025, 0.25, 0.7], abs=0.08)
+    evaluation = SkillEnv("humanoid", {"gravity": (1.0, 1.0)}, env.config.for_evaluation())
+    assert evaluation._phases is None

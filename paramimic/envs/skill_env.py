@@ -38,6 +38,7 @@ from paramimic.messages import SkillOutcome, StepInfo
 from paramimic.motion.fitness import EpisodeTrace, fitness
 from paramimic.motion.measures import CONTACT_HEIGHT, Measure, Trajectory, default_unit
 from paramimic.motion.parameterization import TAU_LIMIT
+from paramimic.motion.phase import PhaseSampler
 
 G = 9.81
 SKILL_TERMS = ("q", "ee", "com", "time", "task")
@@ -85,6 +86,12 @@ class SkillEnv(EnvCore):
         self.trace_shape = (self.skill.trace_bins, self.trace_dim)
         self._bins = (np.arange(self.skill.trace_bins) + 0.5) * self.length / self.skill.trace_bins
         self._hold_steps = int(round(self.skill.hold_seconds / self.dt))
+        cfg = self.config
+        self._phases = (  # RSI's start phases where episodes fail, or uniform
+            PhaseSampler(cfg.phase_bins, cfg.phase_alpha, wrap=False)
+            if cfg.phase_sampling == "failures" and self.skill.rsi > 0
+            else None
+        )
         self._max_steps = int(np.ceil(self.length * np.exp(TAU_LIMIT))) + 1 + self._hold_steps
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.nj + 1,), np.float32)
         self._task = self.task_space.center.copy()
@@ -205,8 +212,10 @@ class SkillEnv(EnvCore):
         noise = self.config.init_noise
         rng = self.np_random
         rsi = self._trace is None and self.skill.rsi > 0 and rng.random() < self.skill.rsi
-        # RSI: a random phase of the clip (not its last control step), else the clip's start
-        start = float(rng.random() * max(self.length - 1.0, 0.0)) if rsi else 0.0
+        # RSI: a phase of the clip (not its last control step; uniform, or where episodes fail:
+        # `env.phase_sampling`), else the clip's start
+        self._start = (self._phases.sample(rng) if self._phases else rng.random()) if rsi else 0.0
+        start = float(self._start * max(self.length - 1.0, 0.0))
         self._rsi = start > 0.0
         d.qpos[:] = at(self._qa, start)
         d.qpos[c.qpos_idx] += noise * rng.standard_normal(self.nj)
@@ -275,6 +284,7 @@ class SkillEnv(EnvCore):
         ends = fell or deviated or completed
         if ends or self._steps >= self._max_steps or self._timed_out():
             info = self._info(dphi, spike, terms, fell=fell, deviated=deviated)
+            self._rsi_ended(failed=fell or deviated)
             return self._end(obs, reward + spike, info, ends, completed)
         info = self._info(dphi, spike, terms, fell=False)
         return obs, reward + spike, False, False, info
@@ -292,8 +302,15 @@ class SkillEnv(EnvCore):
         cut = not stop and self._hold_left > 0 and self._timed_out()
         if stop or cut or self._hold_left <= 0 or self._steps >= self._max_steps:
             info["skill"] = self._held.with_held(not (stop or cut))
+            self._rsi_ended(failed=stop)
             return obs, reward, not cut, cut, info
         return obs, reward, False, False, info
+
+    def _rsi_ended(self, failed: bool) -> None:
+        """An RSI episode ended: its start phase's failure rate learns whether it fell or
+        deviated (`env.phase_sampling: failures`)."""
+        if self._rsi and self._phases is not None:
+            self._phases.update(self._start, failed)
 
     def _deviated(self) -> bool:
         """`deviation_limit` (a training rule, as on clip gaits): a body (relative to the root,

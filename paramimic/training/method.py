@@ -157,6 +157,11 @@ class L21(Method):
             )
         if "target_velocity" in cfg.task:
             out.append("task.target_velocity: a [WL19] gait goal; the skill env has none")
+        if cfg.env.phase_sampling == "failures" and cfg.env.skill.rsi == 0:
+            out.append(
+                "env.phase_sampling: failures draws the start phases of RSI episodes; set "
+                "env.skill.rsi > 0"
+            )
         return out
 
     @cached_property
