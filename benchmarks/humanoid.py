@@ -127,6 +127,7 @@ def seed_verdict(status: dict[int, bool | None], seeds_needed: int = 3) -> str:
         + ")"
     )
 
+
 def load_run(run: Path):
     """(checkpoint state, config, policy in eval mode) of a run directory or checkpoint."""
     from paramimic.training import checkpoint
@@ -510,8 +511,10 @@ def _write_docs(rows: dict[str, list]) -> None:
                 for s in seeds}  # fmt: skip
         met = [s for s in seeds if last[s]["met"]]
         verdict = seed_verdict(
-            {s: judged(r | {"config": config}, r.get("target", {}).get("env_steps"))
-             for s, r in last.items()}  # fmt: skip
+            {
+                s: judged(r | {"config": config}, r.get("target", {}).get("env_steps"))
+                for s, r in last.items()
+            }
         )
         latest = [last[s]["report"] for s in seeds]
         mean = {k: float(np.mean([r[k] for r in latest])) for k in
