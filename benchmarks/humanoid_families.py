@@ -73,7 +73,7 @@ TARGETS = {
 }
 
 
-def _base_controller(config: Path, run_dir: Path):
+def base_controller(config: Path, run_dir: Path):
     """(progress, config, policy) of a family config's starting point: the Trainer's warm start
     from `train.init_from`, no update made."""
     cfg = load_config(config)
@@ -87,7 +87,7 @@ def _base_controller(config: Path, run_dir: Path):
 def evaluate_family(run: Path, bodies: int, seed: int, base: bool = False) -> dict:
     if base:
         with tempfile.TemporaryDirectory() as tmp:
-            progress, cfg, policy = _base_controller(run, Path(tmp))
+            progress, cfg, policy = base_controller(run, Path(tmp))
         wall = 0.0
     else:
         state, cfg, policy = checkpoint.load_policy(run)

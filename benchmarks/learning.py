@@ -431,7 +431,8 @@ def _skill_family_rows() -> list[dict]:
     result = json.loads(path.read_text()) if path.exists() else {"runs": [], "pairs": []}
     rows = []
     runs = [r for r in result["runs"] if r["sampling"] == "curriculum"]
-    for config in sorted({r["config"] for r in runs}):
+    shipped = {r["config"] for r in runs if (ROOT / "configs" / f"{r['config']}.yaml").exists()}
+    for config in sorted(shipped):  # screens (--set name=...) are not targets
         mine = sorted((r for r in runs if r["config"] == config), key=lambda r: r["train_seed"])
         pairs = [p for p in result["pairs"] if p["config"] == config]
         rows.append({

@@ -11,6 +11,7 @@ Train the two arms of a seed (the same config; the baseline only changes the sam
 then judge each run (or one of its checkpoints) and collect the table:
 
     python benchmarks/skill_family.py eval RUN_DIR|CHECKPOINT [--tasks 100] [--seed 90210]
+    python benchmarks/skill_family.py eval configs/humanoid_jump.yaml --base
     python benchmarks/skill_family.py table
 
 `eval` reads the checkpoint's curriculum: ER against N as the run measured it (the share of the
@@ -20,10 +21,13 @@ task box with a seed no training used and performs each with the deterministic p
 m_a = P_θ(a) (the kNN proxy before P_θ is used; `Method.performer`). A task is achieved when
 every measured parameter lands within its σ_task of the goal ([L21] Eq. 8), the clip is
 completed and the character does not fall. Writes
-benchmarks/results/skill_family/<config>_<sampling>_s<seed>_<k steps>k.json.
+benchmarks/results/skill_family/<config>_<sampling>_s<seed>_<k steps>k.json. `eval CONFIG
+--base` judges the family's π0 (its `train.init_from`) the same way, every task performed with
+m0: the row at 0 steps (<config>_base.json).
 
 `table` takes the latest evaluation of each run, compares each seed's curriculum run with its
-uniform run at equal episodes (ER interpolated at the shorter run's N) and writes
+uniform run at equal episodes (ER at the shorter run's N, and the mean ER over those N: the
+area under the curve, which tells how early a run explored) and writes
 benchmarks/results/skill_family/skill_family.json, a Fig. 8 plot per config
 (skill_family_<config>.png) and the table of docs/humanoid_families.md (between its
 `<!-- skill family -->` markers). Targets (per seed, every seed meeting it): ER >= 0.5 within
@@ -34,11 +38,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
 from curriculum import plot  # benchmarks/curriculum.py, beside this script
 from humanoid import training_wall_clock  # benchmarks/humanoid.py
+from humanoid_families import base_controller  # benchmarks/humanoid_families.py
 from tabulate import tabulate
 
 from paramimic.evaluation import evaluate_config
@@ -69,6 +75,8 @@ def evaluate_run(run: Path, tasks: int, seed: int) -> dict:
     report.pop("grid", None)
     steps = int(state["progress"]["env_steps"])
     er = history[-1][1] if history else 0.0
+    phase = core["phase"] if isinstance(core["phase"], dict) else {"phase": core["phase"]}
+    refined = cfg.curriculum.skill.sampling != "curriculum" or bool(phase.get("switches"))
     return {
         "config": cfg.name,
         "sampling": cfg.curriculum.skill.sampling,
@@ -79,8 +87,8 @@ def evaluate_run(run: Path, tasks: int, seed: int) -> dict:
         "episodes": int(history[-1][0]) if history else 0,
         "training_wall_clock_s": training_wall_clock(run, state["progress"]["iteration"]),
         "stage": core["stage"],
-        "phase": core["phase"]["phase"] if isinstance(core["phase"], dict) else core["phase"],
-        "phase_switches": core["phase"]["switches"] if isinstance(core["phase"], dict) else None,
+        "phase": phase["phase"],
+        "phase_switches": phase.get("switches"),
         "explored_ratio": er,
         "curve": [{"episodes": n, "explored_ratio": e} for n, e in history],
         "elites": {
@@ -94,8 +102,48 @@ def evaluate_run(run: Path, tasks: int, seed: int) -> dict:
         },  # fmt: skip
         "report": report,
         "target": {"explored_ratio": TARGET_ER, "env_steps": TARGET_STEPS},
-        "met": er >= TARGET_ER and steps - cfg.ppo.num_steps < TARGET_STEPS,
+        # the curriculum also reached its refinement phase ([L21] §6: a phase switch)
+        "met": er >= TARGET_ER and steps - cfg.ppo.num_steps < TARGET_STEPS and refined,
     }
+
+
+def evaluate_base(config: Path, tasks: int, seed: int) -> dict:
+    """The family's starting point judged as a run is: π0 (`train.init_from`) adopted by the
+    family's config, no update made, every task performed with m0 (no elites yet): the row at 0
+    steps, so that a run's row says what the curriculum added."""
+    with tempfile.TemporaryDirectory() as tmp:
+        _, cfg, policy = base_controller(config, Path(tmp))
+    if not isinstance(method_for(cfg), L21):
+        raise SystemExit(f"{config}: not an [L21] skill family (env.clip unset)")
+    report = evaluate_config(policy, cfg, tasks, seed, grid_size=1)
+    report.pop("grid", None)
+    return {
+        "config": cfg.name,
+        "sampling": "base",
+        "train_seed": None,
+        "eval_seed": seed,
+        "env_steps": 0,
+        "iteration": 0,
+        "episodes": 0,
+        "training_wall_clock_s": 0.0,
+        "stage": "π0",
+        "phase": "-",
+        "phase_switches": 0,
+        "explored_ratio": 0.0,
+        "curve": [],
+        "elites": {"count": 0, "ranges": {}},
+        "report": report,
+        "target": {"explored_ratio": TARGET_ER, "env_steps": TARGET_STEPS},
+        "met": False,
+    }
+
+
+def mean_er(curve: list[dict], n: float) -> float:
+    """The mean ER over the first n episodes: the area under the Fig. 8 curve up to n, over n
+    (how early a run explored, where ER at n alone only says how far)."""
+    ns = np.array([0.0] + [p["episodes"] for p in curve if p["episodes"] < n] + [n])
+    ers = np.array([0.0] + [p["explored_ratio"] for p in curve if p["episodes"] < n])
+    return float(np.sum(np.diff(ns) * ers) / n) if n > 0 else 0.0
 
 
 def _er_at(curve: list[dict], n: float) -> float:
@@ -116,23 +164,27 @@ def pairs(runs: list[dict]) -> list[dict]:
         n = min(r["episodes"], u["episodes"])
         c_er, u_er = _er_at(r["curve"], n), _er_at(u["curve"], n)
         ratio = c_er / u_er if u_er > 0 else None
+        c_mean, u_mean = mean_er(r["curve"], n), mean_er(u["curve"], n)
         out.append({
             "config": config, "seed": seed, "episodes": n,
             "er_curriculum": c_er, "er_uniform": u_er, "ratio": ratio,
+            "mean_er_curriculum": c_mean, "mean_er_uniform": u_mean,
             "met": ratio is not None and ratio >= TARGET_RATIO,
         })  # fmt: skip
     return out
 
 
 def latest_runs() -> list[dict]:
-    """The latest evaluation (most env steps) of each (config, sampling, seed)."""
+    """Each family's π0 row (`eval --base`) and the latest evaluation (most env steps) of each
+    (config, sampling, seed)."""
     latest: dict[tuple, dict] = {}
     for path in sorted(RESULTS.glob("*_s*_*k.json")):
         r = json.loads(path.read_text())
         key = (r["config"], r["sampling"], r["train_seed"])
         if key not in latest or r["env_steps"] > latest[key]["env_steps"]:
             latest[key] = r
-    return list(latest.values())
+    bases = [json.loads(p.read_text()) for p in sorted(RESULTS.glob("*_base.json"))]
+    return bases + list(latest.values())
 
 
 def _table(header, rows) -> str:
@@ -143,16 +195,18 @@ def table() -> dict:
     runs = latest_runs()
     compared = pairs(runs)
     rows = []
-    for r in sorted(runs, key=lambda r: (r["config"], r["sampling"], r["train_seed"])):
-        rep = r["report"]
+    for r in sorted(runs, key=lambda r: (r["config"], r["sampling"] != "base", r["sampling"],
+                                         r["train_seed"] or 0)):  # fmt: skip
+        rep, base = r["report"], r["sampling"] == "base"
         rows.append([
-            r["config"], r["sampling"], r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
+            r["config"], "π0 (no curriculum)" if base else r["sampling"],
+            "any" if base else r["train_seed"], f"{r['env_steps'] / 1e6:.2f}M",
             f"{r['training_wall_clock_s'] / 60:.0f} min", f"{r['episodes']:,}", r["stage"],
             r["phase"], f"{r['explored_ratio']:.3f}", r["elites"]["count"],
             f"{100 * rep.get('achieved_share', 0.0):.0f} %",
             ", ".join(f"{n} {e:.1f}" for n, e in rep.get("task_error_sigmas", {}).items()),
             f"{rep['fall_percent']:.0f} %",
-            "yes" if r["met"] else "no",
+            "" if base else "yes" if r["met"] else "no",
         ])  # fmt: skip
     header = ["config", "sampling", "seed", "env steps", "training wall-clock", "episodes N",
               "stage", "phase", "ER", "elites", "tasks achieved", "error / σ_task", "falls",
@@ -161,13 +215,19 @@ def table() -> dict:
     if compared:
         body += "\n\nThe curriculum against uniform sampling at equal episodes (per seed):\n\n"
         body += _table(
-            ["config", "seed", "episodes N", "ER curriculum", "ER uniform", "ratio", ">= 1.5x"],
+            ["config", "seed", "episodes N", "ER curriculum", "ER uniform", "ratio", ">= 1.5x",
+             "mean ER over N: curriculum", "uniform"],
             [[p["config"], p["seed"], f"{p['episodes']:,}", f"{p['er_curriculum']:.3f}",
               f"{p['er_uniform']:.3f}", "-" if p["ratio"] is None else f"{p['ratio']:.2f}x",
-              "yes" if p["met"] else "no"] for p in compared],
+              "yes" if p["met"] else "no", f"{p['mean_er_curriculum']:.3f}",
+              f"{p['mean_er_uniform']:.3f}"] for p in compared],
         )  # fmt: skip
     for config in sorted({r["config"] for r in runs}):
-        mine = [r | {"seed": r["train_seed"]} for r in runs if r["config"] == config]
+        mine = [
+            r | {"seed": r["train_seed"]}
+            for r in runs
+            if r["config"] == config and r["sampling"] != "base"
+        ]
         png = RESULTS / f"skill_family_{config}.png"
         plot(mine, png, config)
         body += f"\n\n![ER against episodes N, {config}](data/skill_family/{png.name})"
@@ -189,15 +249,20 @@ def main() -> None:
     e.add_argument("run", type=Path)
     e.add_argument("--tasks", type=int, default=100)
     e.add_argument("--seed", type=int, default=EVAL_SEED)
+    e.add_argument("--base", action="store_true", help="RUN is a family config: judge its π0")
     sub.add_parser("table", help="collect the evaluations into the JSON and docs")
     args = p.parse_args()
     if args.cmd == "eval":
-        r = evaluate_run(args.run, args.tasks, args.seed)
+        if args.base:
+            r = evaluate_base(args.run, args.tasks, args.seed)
+            name = f"{r['config']}_base.json"
+        else:
+            r = evaluate_run(args.run, args.tasks, args.seed)
+            name = (
+                f"{r['config']}_{r['sampling']}_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
+            )
         RESULTS.mkdir(parents=True, exist_ok=True)
-        out = (
-            RESULTS
-            / f"{r['config']}_{r['sampling']}_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
-        )
+        out = RESULTS / name
         out.write_text(json.dumps(r, indent=1))
         rep = r["report"]
         print(

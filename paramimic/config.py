@@ -475,6 +475,13 @@ class SkillCurriculumConfig(Section):
     episodes_per_param: int = Field(30, ge=1, description="episodes per parameter ([L21] §6)")
     elite_radius: PositiveFloat = Field(0.1, description="r of Eq. 13 ([L21] §5.2)")
     fitness_threshold: float = Field(0.1, ge=0, description="elites need F above it (§5.2)")
+    constraint_tolerance: PositiveFloat | None = Field(
+        None,
+        description="elites must also hold every constraint (a zero-range measured parameter) "
+        "within this many σ_task (ours); None: [L21] §5.2's rule, where a constraint only "
+        "adds w_constraint · r_constraint (Eq. 10, at most 0.1) to F, so a performance that "
+        "breaks it still enters",
+    )
     improvement: float = Field(0.02, ge=0, description="exploration-rate margin (§6.1)")
     density_visited: PositiveFloat = Field(0.8, description="D: A_h where density >= D (§6.2)")
     density_surrounding: PositiveFloat = Field(0.2, description="D': A_s from D' (§6.2)")

@@ -102,6 +102,9 @@ class SkillOutcome:
     trace: np.ndarray | None
     completed: bool
     held: bool | None = None
+    # the largest miss of a constraint (a zero-range measured parameter) in its σ_task, on a
+    # completed episode of a family with constraints (None otherwise)
+    constraint_error: float | None = None
 
     def with_held(self, held: bool) -> SkillOutcome:
         return replace(self, held=held)
@@ -117,6 +120,7 @@ class SkillOutcome:
             _array(d.get("trace")),
             bool(d["completed"]),
             d.get("held"),
+            d.get("constraint_error"),
         )
 
 

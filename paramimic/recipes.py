@@ -104,6 +104,9 @@ PRESETS: dict[str, dict[str, Setting]] = {
         "curriculum.widen": _s(None, L21_OFF),
         "curriculum.skill.sampling": _s("curriculum", "[L21] §6"),
         "curriculum.skill.motion_parameterization": _s(True, "[L21] §5.3 (A3)"),
+        "curriculum.skill.constraint_tolerance": _s(
+            None, "[L21] §5.2, Eq. 10 (a constraint only lowers F)"
+        ),
         "curriculum.skill.p_hidden": _s((512, 512), L21),
         "curriculum.skill.p_lr": _s(1e-3, L21),
         "curriculum.skill.p_batch": _s(128, L21),

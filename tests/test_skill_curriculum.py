@@ -23,8 +23,9 @@ def make(**skill) -> SkillCurriculum:
     return SkillCurriculum(SPACE, cfg, seed=0, reference=np.array([0.5, 0.5]), trace_shape=SHAPE)
 
 
-def episode(i, achieved, fitness, batch=None, trace_value=None):
+def episode(i, achieved, fitness, batch=None, trace_value=None, constraint_error=None):
     trace = None if trace_value is None else np.full(SHAPE, trace_value)
+    done = trace is not None
     return EpisodeReport(
         f"e{i}",
         np.asarray(achieved, float),
@@ -34,7 +35,9 @@ def episode(i, achieved, fitness, batch=None, trace_value=None):
         diverged=False,
         reward_terms={},
         ended_early=False,
-        skill=SkillOutcome(np.asarray(achieved, float), fitness, trace, trace is not None),
+        skill=SkillOutcome(
+            np.asarray(achieved, float), fitness, trace, done, constraint_error=constraint_error
+        ),
         tags=DealTags(batch=batch),
     )
 
@@ -58,6 +61,22 @@ def test_elites_keep_their_traces_and_replace_worse_neighbours():
     params, traces = c.elite_data()
     assert params.tolist() == [[0.51, 0.5]] and traces.shape == (1, *SHAPE)
     assert c.stats["episodes"] == 5
+
+
+def test_a_constraint_tolerance_keeps_performances_that_break_a_constraint_out():
+    # [L21] §5.2 as written: the constraint only lowers F, so a performance 3 σ_task off enters
+    paper = make()
+    paper.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0, constraint_error=3.0)])
+    assert set(paper.traces) == {"e0"}
+    ours = make(constraint_tolerance=1.0)
+    ours.ingest([episode(0, (0.5, 0.5), 0.9, trace_value=1.0, constraint_error=3.0)])
+    assert ours.traces == {}
+    ours.ingest([episode(1, (0.5, 0.5), 0.8, trace_value=2.0, constraint_error=0.7)])
+    ours.ingest([episode(2, (0.9, 0.9), 0.8, trace_value=3.0)])  # a family without constraints
+    assert set(ours.traces) == {"e1", "e2"}
+    # the outcome's constraint miss crosses the actor-learner boundary
+    sent = episode(3, (0.5, 0.5), 0.9, trace_value=1.0, constraint_error=2.5).skill
+    assert SkillOutcome.from_dict(sent.to_dict()).constraint_error == 2.5
 
 
 def test_motions_follow_the_bootstrap_stage():

@@ -251,6 +251,9 @@ def test_a_zero_range_measure_is_a_constraint_in_the_fitness():
     assert turned == pytest.approx(abs(pitch) / (2 * np.pi), abs=0.01)
     # W_CONSTRAINT 0.1 x exp(-(turned / 0.5)²)
     assert f1.fitness - f0.fitness == pytest.approx(0.1 * np.exp(-((turned / 0.5) ** 2)))
+    # the constraint's miss in σ_task, for `curriculum.skill.constraint_tolerance`
+    assert f1.constraint_error == pytest.approx(turned / 0.5)
+    assert f0.constraint_error is None  # no constraint
 
 
 def test_a_reference_unit_needs_a_measure_the_clip_has():

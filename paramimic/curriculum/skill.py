@@ -34,7 +34,7 @@ from paramimic.curriculum.density import (
 from paramimic.curriculum.elite_set import EliteRule, EliteSet, Offer
 from paramimic.curriculum.knn_proxy import knn_proxy
 from paramimic.curriculum.mcmc import metropolis_hastings, surrogate_log_density
-from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
+from paramimic.messages import CurriculumSummary, EpisodeReport, SkillOutcome, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
 
@@ -227,6 +227,14 @@ class SkillCurriculum(AdaptiveCurriculum):
 
     # --- what finished episodes report ---------------------------------------------------------
 
+    def _holds_constraints(self, skill: SkillOutcome | None) -> bool:
+        """An episode the elite set may consider: a completed clip with its hindsight a' (and,
+        with `constraint_tolerance`, every constraint held within that many σ_task)."""
+        if skill is None or skill.achieved is None:
+            return False
+        tol = self.sc.constraint_tolerance
+        return tol is None or skill.constraint_error is None or skill.constraint_error <= tol
+
     def ingest(self, episodes: Iterable[EpisodeReport]) -> int:
         """Count episodes and offer each with a trace to the elite set at its achieved a'."""
         episodes = list(episodes)
@@ -237,7 +245,7 @@ class SkillCurriculum(AdaptiveCurriculum):
             if skill is not None and skill.achieved is not None:
                 self.achieved.append([float(x) for x in skill.achieved])
             offer = Offer(False)
-            if skill is not None and skill.trace is not None and skill.achieved is not None:
+            if self._holds_constraints(skill) and skill.trace is not None:
                 offer = self.elites.offer(
                     np.asarray(skill.achieved, np.float64), float(skill.fitness), e.episode_id
                 )

@@ -514,10 +514,11 @@ class SkillEnv(EnvCore):
         )
         # Eq. 10: zero-range measured parameters are constraints the episode should meet
         fixed = [t for t in self.measured if self.task_space.width[t.index] == 0]
-        r_constraint = 0.0
+        r_constraint, missed = 0.0, None
         if fixed:
             err = [(self.measure(t, traj) - self._task[t.index]) / t.sigma for t in fixed]
             r_constraint = l21_task(float(np.linalg.norm(err)), 1.0)
+            missed = float(np.max(np.abs(err)))
         f = fitness(
             EpisodeTrace(
                 pose_error=np.abs(np.asarray(rec["pose"])),
@@ -530,7 +531,7 @@ class SkillEnv(EnvCore):
             ),
             r_constraint,
         )
-        return SkillOutcome(achieved, f, trace, True)
+        return SkillOutcome(achieved, f, trace, True, constraint_error=missed)
 
     def _observe(self) -> np.ndarray:
         c, d = self.character, self.data
