@@ -357,6 +357,8 @@ def table() -> dict:
                 for r in seeds
             },
             "mean": {k: float(np.mean([r["report"][k] for r in seeds])) for k in keys},
+            # a base controller of a body family (the dance) has no target of its own
+            "targeted": seeds[0]["gait"] in TARGETS,
             "met": len(seeds) >= 3 and all(r["met"] for r in seeds),
         }
     screens = [json.loads(p.read_text()) for p in sorted(SCREENS.glob("*.json"))]
