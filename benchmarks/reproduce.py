@@ -17,7 +17,7 @@ the serial trainer in its own run directory (runs/reproduce/..., resumed where i
 evaluated once at its budget; its JSON and the table's (reproduce.json) go to
 benchmarks/results/reproduce/.
 
-    python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--steps 2000000]
+    python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--steps 2000000] [--jobs 2]
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
     python benchmarks/reproduce.py list
 """
@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import time
 from pathlib import Path
 
@@ -119,9 +120,12 @@ def result_path(row: str, arm: str, variant: str, seed: int, steps: int) -> Path
     return OUT / f"{row}_{arm}_{variant}_s{seed}_{steps // 1000}k.json"
 
 
-def run_one(row: str, arm: str, variant: str, seed: int, steps: int) -> dict:
+def run_one(
+    row: str, arm: str, variant: str, seed: int, steps: int, threads: int | None = None
+) -> dict:
     """Train one variant of a row in one arm to `steps` (resumed from its run directory), then
-    evaluate it; the JSON is kept and not run again."""
+    evaluate it; the JSON is kept and not run again. `threads`: the learner's torch threads
+    (one per run when runs share the machine; default: the config's)."""
     import torch
 
     from paramimic.config import load_config
@@ -134,7 +138,10 @@ def run_one(row: str, arm: str, variant: str, seed: int, steps: int) -> dict:
     run_dir = ROOT / "runs" / "reproduce" / row / arm / f"{variant}_s{seed}"
     cfg = load_config(
         ROOT / config,
-        arm_overrides | overrides | {"train.seed": seed, "train.run_dir": str(run_dir)},
+        arm_overrides
+        | overrides
+        | {"train.seed": seed, "train.run_dir": str(run_dir)}
+        | ({"train.torch_threads": threads} if threads else {}),
     )
     torch.manual_seed(seed)
     t0 = time.perf_counter()
@@ -252,6 +259,12 @@ def main() -> None:
     r.add_argument("--variants", default=None, help="comma-separated; default: every variant")
     r.add_argument("--seeds", default="0,1,2")
     r.add_argument("--steps", type=int, default=None, help="default: the row's budget")
+    r.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="runs at once, one process and one torch thread each (2 on a 2-core machine)",
+    )
     sub.add_parser("table")
     sub.add_parser("list")
     args = ap.parse_args()
@@ -266,6 +279,7 @@ def main() -> None:
     spec = ROWS[args.row]
     steps = args.steps or spec["steps"]
     variants = args.variants.split(",") if args.variants else list(spec["variants"])
+    jobs = []
     for variant in variants:
         if variant not in spec["variants"]:
             raise SystemExit(f"{args.row}: no variant {variant!r}; known: {list(spec['variants'])}")
@@ -273,7 +287,13 @@ def main() -> None:
             if result_path(args.row, args.arm, variant, seed, steps).exists():
                 print(f"kept: {args.row} {args.arm} {variant} seed {seed}")
                 continue
-            run_one(args.row, args.arm, variant, seed, steps)
+            jobs.append((args.row, args.arm, variant, seed, steps))
+    if args.jobs <= 1:
+        for job in jobs:
+            run_one(*job)
+        return
+    with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
+        pool.starmap(run_one, [(*job, 1) for job in jobs], chunksize=1)
 
 
 if __name__ == "__main__":
