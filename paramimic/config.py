@@ -514,9 +514,9 @@ class SkillCurriculumConfig(Section):
 
 
 class WidenConfig(Section):
-    """A task range that grows from the box's centre (the base body) as the controller masters
-    it: automatic domain randomization's rule (OpenAI 2019) on one width for all free dims. Tasks
-    drawn from S are pulled toward the centre to `width` of their offset (V̄ sampling runs
+    """A task range that grows from the base body (`origin`) as the controller masters it:
+    automatic domain randomization's rule (OpenAI 2019) on one width for all free dims. Tasks
+    drawn from S are pulled toward the origin to `width` of their offset (V̄ sampling runs
     inside the current range); the width grows by `step` when fewer than `promote_below` of
     `window` episodes failed. Which episodes, and what fails one (`promote_on`):
     - `early_ends`: the training episodes, ended early for any reason the env has (a fall, a
@@ -544,6 +544,12 @@ class WidenConfig(Section):
     )
     check_every: int = Field(
         10, ge=1, description="`edge` only: iterations between two tests of the range's edge"
+    )
+    origin: Literal["base", "center"] = Field(
+        "base",
+        description="where the range grows from: the base body (every shape parameter at 1.0, "
+        "clipped into its range; other dims at their centre) or the box's centre (the two agree "
+        "on a box centred on 1.0; the humanoid Fig. 2a runs of 2026-12 grew from the centre)",
     )
 
 

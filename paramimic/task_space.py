@@ -6,7 +6,7 @@ constraint: the parameter is fixed but still part of the policy's input.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +39,12 @@ class TaskSpace:
     @property
     def center(self) -> np.ndarray:
         return 0.5 * (self.low + self.high)
+
+    def base(self, shape_names: Iterable[str]) -> np.ndarray:
+        """The base body's task: every shape parameter (`shape_names`) at 1.0, the base body's
+        scale, clipped into its range; every other dimension at the range's centre."""
+        shape = [name in set(shape_names) for name in self.names]
+        return np.where(shape, np.clip(1.0, self.low, self.high), self.center)
 
     @property
     def free(self) -> np.ndarray:

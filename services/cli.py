@@ -421,11 +421,7 @@ def render(
     space = env.task_space
     dims = cfg.display_dims()
     bodies = _parse_shapes(shapes, space.names) if shapes else _default_bodies(space, dims)
-    base = space.center.copy()
-    shape_names = set(env.definition.param_names())
-    for i, name in enumerate(space.names):  # the base body where the range holds it
-        if name in shape_names and space.low[i] <= 1.0 <= space.high[i]:
-            base[i] = 1.0
+    base = space.base(env.definition.param_names())
     tasks = []
     for shape in bodies:
         a = base.copy()

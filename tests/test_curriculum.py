@@ -179,3 +179,31 @@ def test_without_widen_the_range_is_whole():
     assert c.width == 1.0
     tasks = c.next_tasks(500)
     assert tasks[:, 0].min() < 0.85 and tasks[:, 0].max() > 1.15
+
+
+def test_a_range_off_centre_grows_from_the_base_body_not_the_box_centre():
+    task = {"leg_length": [0.7, 1.5], "torso_length": [1.1, 1.3], "target_velocity": [0.5, 1.5]}
+
+    def widening(origin: str) -> AdaptiveCurriculum:
+        cfg = ExperimentConfig.model_validate({
+            "character": "hopper", "task": task,
+            "curriculum": {"n_mcmc": 40, "widen": {"start": 0.1, "origin": origin}},
+        })  # fmt: skip
+        return AdaptiveCurriculum.from_config(cfg)
+
+    base = widening("base")
+    # legs at the base body's 1.0; the torso's 1.0 is outside its range: its nearest end; the
+    # goal at its centre
+    np.testing.assert_allclose(base.origin, [1.0, 1.1, 1.0])
+    tasks = base.next_tasks(400)
+    assert np.all(np.abs(tasks - base.origin) <= [0.05 + 1e-9, 0.02 + 1e-9, 0.05 + 1e-9])
+    assert tasks[:, 0].min() < 0.99 and tasks[:, 0].max() > 1.02  # both sides of the base legs
+    edge = base.edge_tasks(200, seed=2)
+    lo = base.origin + 0.1 * (base.space.low - base.origin)
+    hi = base.origin + 0.1 * (base.space.high - base.origin)
+    assert np.all((edge >= lo - 1e-9) & (edge <= hi + 1e-9))
+    at_bound = np.isclose(edge, lo) | np.isclose(edge, hi)
+    assert at_bound.any(axis=1).all()  # each on the range's edge in one dimension
+    centre = widening("center")  # the box's centre: legs around 1.1
+    np.testing.assert_allclose(centre.origin, centre.space.center)
+    assert np.abs(centre.next_tasks(400)[:, 0] - 1.1).max() <= 0.04 + 1e-9

@@ -9,6 +9,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from paramimic.characters import registration
 from paramimic.config import CurriculumConfig, ExperimentConfig
 from paramimic.curriculum.mcmc import AdaptiveSampler
 from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
@@ -42,8 +43,11 @@ class AdaptiveCurriculum:
         config: CurriculumConfig,
         seed: int,
         display_dims: Sequence[str] = (),
+        origin: np.ndarray | None = None,
     ) -> None:
         self.space = space
+        # where a widening range grows from (`WidenConfig.origin`); the box's centre by default
+        self.origin = space.center if origin is None else np.asarray(origin, dtype=np.float64)
         self.config = config
         self.sampler = AdaptiveSampler(
             space, config.k_at(0), config.n_mcmc, config.chains, config.burn_in, seed=seed
@@ -62,7 +66,17 @@ class AdaptiveCurriculum:
     @classmethod
     def from_config(cls, cfg: ExperimentConfig) -> AdaptiveCurriculum:
         space = TaskSpace.from_ranges(cfg.task)
-        return cls(space, cfg.curriculum, seed=cfg.train.seed + 3, display_dims=cfg.display_dims())
+        widen = cfg.curriculum.widen
+        origin = None
+        if widen is not None and widen.origin == "base":
+            origin = space.base(registration(cfg.character).character.param_names())
+        return cls(
+            space,
+            cfg.curriculum,
+            seed=cfg.train.seed + 3,
+            display_dims=cfg.display_dims(),
+            origin=origin,
+        )
 
     @property
     def mode(self) -> str:
@@ -82,12 +96,11 @@ class AdaptiveCurriculum:
             self.sampler.refill(lambda a: v_bar(self.pull(a)), self.mu)
 
     def pull(self, tasks: np.ndarray) -> np.ndarray:
-        """Tasks of the full box mapped into the current range: toward the box's centre to
-        `width` of their offset (the identity without `widen`)."""
+        """Tasks of the full box mapped into the current range: toward its origin (the base
+        body) to `width` of their offset (the identity without `widen`)."""
         if self.width >= 1.0:
             return tasks
-        center = self.space.center
-        return center + self.width * (np.asarray(tasks) - center)
+        return self.origin + self.width * (np.asarray(tasks) - self.origin)
 
     def next_tasks(self, n: int) -> np.ndarray:
         """n task parameters drawn from S: [n, d]."""
@@ -133,15 +146,16 @@ class AdaptiveCurriculum:
 
     def edge_tasks(self, n: int, seed: int) -> np.ndarray | None:
         """n tasks on the current range's edge (`promote_on: edge`), or None once the range is
-        whole: uniform in the range, each pushed out along its offset from the centre until one
+        whole: uniform in the range, each pushed out along its offset from the origin until one
         free dimension sits at the range's bound (ADR's boundary sampling, one width for all)."""
         if self.width >= 1.0:
             return None
         rng = np.random.default_rng(seed)
-        center, half = self.space.center, 0.5 * self.space.width
         u = np.where(self.space.free, rng.uniform(-1.0, 1.0, (n, self.space.dim)), 0.0)
         u /= np.maximum(np.abs(u).max(axis=1, keepdims=True), 1e-12)
-        return center + self.width * u * half
+        # the range's half-extents on either side of the origin (the box's `pull`ed to `width`)
+        reach = np.where(u >= 0, self.space.high - self.origin, self.origin - self.space.low)
+        return self.origin + self.width * u * reach
 
     def judge_edge(self, episodes: int, falls: int) -> float:
         """The edge test's outcome (`edge_tasks`' episodes and how many fell) decides a
