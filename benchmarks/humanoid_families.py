@@ -96,6 +96,9 @@ def evaluate_family(run: Path, bodies: int, seed: int, base: bool = False) -> di
     if cfg.env.gait is None or not any(hi > lo for lo, hi in cfg.task.values()):
         raise SystemExit(f"{run}: not a humanoid family on a clip gait (env.gait, a task range)")
     report = evaluate_config(policy, cfg, bodies, seed, grid_size=7, seconds=30.0)
+    if cfg.env.reward.w_com_velocity == 0:  # in place (the dance): no speed to hold
+        for key in ("speed_over_target", "on_target_share"):
+            report.pop(key, None)
     steps = int(progress["env_steps"])
     out = {
         "config": cfg.name,
@@ -168,6 +171,14 @@ def _rows() -> dict[str, list[dict]]:
     return rows
 
 
+def _speed_cells(rep: dict) -> tuple[str, str]:
+    """The speed over the body's target and the share within 15 % (an in-place family has
+    neither)."""
+    if "speed_over_target" not in rep:
+        return "in place", "in place"
+    return f"{rep['speed_over_target']:.2f}x", f"{100 * rep['on_target_share']:.0f} %"
+
+
 def table() -> str:
     header = ["family", "seed", "env steps", "training wall-clock", "bodies", "falls in 30 s",
               "speed / target", "within 15 %", "body error (m)", "worst decile / mean",
@@ -182,8 +193,7 @@ def table() -> str:
                 config, "any" if base else r["train_seed"],
                 "0 (the base controller)" if base else f"{r['env_steps'] / 1e6:.2f}M",
                 f"{r.get('training_wall_clock_s', 0) / 60:.0f} min", rep["episodes"],
-                f"{rep['fall_percent']:.1f} %", f"{rep['speed_over_target']:.2f}",
-                f"{100 * rep['on_target_share']:.0f} %", f"{rep['mean_body_error']:.3f}",
+                f"{rep['fall_percent']:.1f} %", *_speed_cells(rep), f"{rep['mean_body_error']:.3f}",
                 f"{rep['worst_decile_return'] / rep['mean_return']:.2f}",
                 f"{rep['uniformity']['coefficient_of_variation']:.3f}",
                 "" if base else met,
@@ -291,10 +301,11 @@ def main() -> None:
         title = f"{r['config']} seed {r['train_seed']}, {r['env_steps'] / 1e6:.1f}M steps"
         write_heatmap(grid, RESULTS / f"{stem}.png", title)
     rep = r["report"]
+    speed, within = _speed_cells(rep)
     print(
         f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps: falls "
-        f"{rep['fall_percent']:.1f} %, speed {rep['speed_over_target']:.2f}x its target, "
-        f"{100 * rep['on_target_share']:.0f} % within 15 %; met: {r.get('met', 'measured')}"
+        f"{rep['fall_percent']:.1f} %, speed {speed} its target, {within} within 15 %, body "
+        f"error {rep['mean_body_error']:.3f} m; met: {r.get('met', 'measured')}"
     )
     print(f"wrote {RESULTS / stem}.json")
 
