@@ -549,7 +549,7 @@ class WidenConfig(Section):
         "base",
         description="where the range grows from: the base body (every shape parameter at 1.0, "
         "clipped into its range; other dims at their centre) or the box's centre (the two agree "
-        "on a box centred on 1.0; the humanoid Fig. 2a runs of 2026-12 grew from the centre)",
+        "on a box centred on 1.0)",
     )
 
 
