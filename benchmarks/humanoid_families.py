@@ -302,10 +302,11 @@ def main() -> None:
         write_heatmap(grid, RESULTS / f"{stem}.png", title)
     rep = r["report"]
     speed, within = _speed_cells(rep)
+    speed = "in place" if speed == "in place" else f"speed {speed} its target, {within} within 15 %"
     print(
         f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps: falls "
-        f"{rep['fall_percent']:.1f} %, speed {speed} its target, {within} within 15 %, body "
-        f"error {rep['mean_body_error']:.3f} m; met: {r.get('met', 'measured')}"
+        f"{rep['fall_percent']:.1f} %, {speed}, body error {rep['mean_body_error']:.3f} m; "
+        f"met: {r.get('met', 'measured')}"
     )
     print(f"wrote {RESULTS / stem}.json")
 
