@@ -9,7 +9,6 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from paramimic.characters import registration
 from paramimic.config import CurriculumConfig, ExperimentConfig
 from paramimic.curriculum.mcmc import AdaptiveSampler
 from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
@@ -69,6 +68,9 @@ class AdaptiveCurriculum:
         widen = cfg.curriculum.widen
         origin = None
         if widen is not None and widen.origin == "base":
+            # the registry loads MuJoCo: only here, as the config's own validation does
+            from paramimic.characters import registration
+
             origin = space.base(registration(cfg.character).character.param_names())
         return cls(
             space,
