@@ -305,9 +305,7 @@ def table() -> str:
         for variant in spec["variants"]:
             cells = {}
             for arm in ("paper", "ours"):
-                paths = sorted(OUT.glob(f"{row}_{arm}_{variant}_s*_*k.json"))
-                found = [json.loads(p.read_text()) for p in paths]
-                cells[arm] = _cell(row, found)
+                cells[arm] = _cell(row, _results(row, arm, variant))
             budget = f"{spec['steps'] / 1e6:.0f}M per run"
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], budget])  # fmt: skip
