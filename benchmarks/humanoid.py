@@ -148,7 +148,7 @@ def evaluate_run(run: Path, episodes: int, seed: int) -> dict:
     report.pop("grid", None)
     steps = int(state["progress"]["env_steps"])
     no_fall, error, speed, budget = TARGETS.get(cfg.env.gait, (0.95, 0.06, 0.10, None))
-    if cfg.env.reward.w_com_velocity == 0:  # in place (the dance): no speed to hold
+    if cfg.env.reward.in_place:
         speed = None
     checks = {
         "no_fall": 1.0 - report["fall_percent"] / 100.0 >= no_fall,

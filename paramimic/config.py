@@ -82,6 +82,12 @@ class RewardConfig(Section):
         "(terms of weight 0 left out), so that a step pays only as much as its worst term",
     )
 
+    @property
+    def in_place(self) -> bool:
+        """No velocity task: the COM-velocity term's weight is 0 (a clip performed in place,
+        [WL19] Fig. 2c's dance), so there is no speed to hold."""
+        return self.w_com_velocity == 0
+
     def weights(self, table3: tuple[float, ...]) -> tuple[float, ...]:
         """w1..w6: the ones set here, the character's [WL19] Table 3 row for the others."""
         names = ("w_pose", "w_velocity", "w_end_effector", "w_com_velocity", "w_direction")

@@ -5,7 +5,8 @@ import pytest
 
 from paramimic.config import ConfigError, load_config
 
-CONFIGS = sorted(Path(__file__).parent.parent.glob("configs/*.yaml"))
+CONFIG_DIR = Path(__file__).parent.parent / "configs"
+CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
@@ -92,6 +93,15 @@ def test_physics_rate_defaults_to_the_characters_and_old_configs_keep_theirs(tmp
     assert (old.env.physics_hz, old.env.frame_skip) == (600, 20)
     chosen = load_config(_write(tmp_path, "character: quadruped\nenv: {physics_hz: 150}"))
     assert chosen.env.frame_skip == 5
+
+
+def test_a_clip_with_no_velocity_term_is_performed_in_place(tmp_path):
+    """`env.reward.in_place` (no speed to hold) is the COM-velocity weight set to 0, not left to
+    the character's [WL19] Table 3 row."""
+    assert load_config(CONFIG_DIR / "humanoid_dance.yaml").env.reward.in_place
+    assert not load_config(CONFIG_DIR / "humanoid_walk.yaml").env.reward.in_place
+    cfg = load_config(_write(tmp_path, "character: humanoid\nenv: {reward: {w_com_velocity: 0.5}}"))
+    assert not cfg.env.reward.in_place
 
 
 def test_shape_scale_shrinks_every_documented_range_toward_the_base_body(tmp_path):
