@@ -76,6 +76,13 @@ class RewardConfig(Section):
     normalize: bool = Field(
         True, description="scale velocity, direction and energy by the body ([WL19] §4.3)"
     )
+    end_effector_frame: Literal["root", "heading"] = Field(
+        "root",
+        description="the frame of Eq. 5's end-effector positions: root, the root's own frame "
+        "(the body's tilt is not imitated; [WL19]'s gaits stay upright), or heading, relative to "
+        "the root in its heading frame (yaw removed, tilt kept, as DeepMimic's end-effector term): "
+        "a clip that rolls the body over, the cartwheel, is then imitated as a whole",
+    )
     combine: Literal["sum", "product"] = Field(
         "sum",
         description="sum: Eq. 4, the weighted mean of the bells; product: the bells multiplied "
@@ -820,6 +827,11 @@ class ExperimentConfig(Section):
             _check_clip_name(field, getattr(self.env, field), registration)
         if self.env.gait is not None and character.planar:
             raise ValueError(f"env.gait: clip gaits need a free root; {self.character!r} is planar")
+        if self.env.reward.end_effector_frame == "heading" and self.env.gait is None:
+            raise ValueError(
+                "env.reward.end_effector_frame: heading needs a clip gait (env.gait), whose "
+                "reference has a root orientation to imitate"
+            )
         if "target_direction" in self.task and character.planar:
             raise ValueError(
                 f"task.target_direction: {self.character!r} moves in the sagittal plane only"

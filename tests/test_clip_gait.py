@@ -312,3 +312,33 @@ def test_deviated_episodes_are_reported_as_such_not_as_falls():
     m = episode_metrics(f.episodes)
     assert m["deviated_percent"] == pytest.approx(100.0 * len(deviated) / len(f.episodes))
     assert f.episodes[0].to_dict()["deviated"] == f.episodes[0].deviated
+
+
+def test_end_effectors_in_the_heading_frame_imitate_the_bodys_tilt():
+    """reward.end_effector_frame: heading compares the end-effectors relative to the root in its
+    heading frame, so a body that leans away from its reference loses the term; in the root's
+    own frame (the default) the same lean goes unseen."""
+    cartwheel = GAIT | {"gait": "humanoid_cartwheel"}
+    ee = {}
+    for frame in ("root", "heading"):
+        env = make_env("humanoid", {}, cartwheel | {"reward": {"end_effector_frame": frame}})
+        env.reset(seed=3)
+        env._sense()
+        ref = env._reference_at(env._phase)
+        at_reference = env._reward(ref)[1]["end_effector"]
+        lean = Rotation.from_euler("y", 1.0)  # 57° about the world's y axis, joints kept
+        rot = Rotation.from_quat(env.data.qpos[3:7], scalar_first=True)
+        env.data.qpos[3:7] = (lean * rot).as_quat(scalar_first=True)
+        mujoco.mj_forward(env.model, env.data)
+        env._sense()
+        ee[frame] = (at_reference, env._reward(ref)[1]["end_effector"])
+    n_ee = len(env.character.ee_site_ids)
+    for frame in ee:  # the reference state matches its reference in both frames
+        assert ee[frame][0] == pytest.approx(n_ee, abs=0.05)
+    assert ee["root"][1] == pytest.approx(ee["root"][0], abs=1e-9)
+    assert ee["heading"][1] < 0.7 * n_ee
+    # the heading frame needs a reference root orientation: a clip gait's
+    with pytest.raises(ValidationError, match="end_effector_frame: heading needs a clip gait"):
+        ExperimentConfig.model_validate(
+            {"character": "humanoid", "env": {"reward": {"end_effector_frame": "heading"}}}
+        )

@@ -34,16 +34,22 @@ INSTABILITY = slice(
 MAX_SPEED = 100.0  # an RMS of qvel above this (m/s, rad/s) is a diverged simulation
 
 
-def bodies_in_heading_frame(xpos: np.ndarray, xmat: np.ndarray, root: int) -> np.ndarray:
-    """Every body after `root` [B, 3] relative to the root, in the root's heading frame (the
-    root's x axis in the ground plane; yaw removed): what the body position error compares."""
-    fx, fy = xmat[root, 0], xmat[root, 3]
+def in_heading_frame(points: np.ndarray, origin: np.ndarray, xmat: np.ndarray) -> np.ndarray:
+    """Points [N, 3] relative to `origin`, in the heading frame of the body whose rotation
+    matrix (row-major [9]) is `xmat`: its x axis in the ground plane; yaw removed, tilt kept."""
+    fx, fy = xmat[0], xmat[3]
     norm = float(np.hypot(fx, fy)) or 1.0
     fx, fy = fx / norm, fy / norm
-    rel = xpos[root + 1 :] - xpos[root]
+    rel = points - origin
     return np.column_stack(
         [rel[:, 0] * fx + rel[:, 1] * fy, rel[:, 1] * fx - rel[:, 0] * fy, rel[:, 2]]
     )
+
+
+def bodies_in_heading_frame(xpos: np.ndarray, xmat: np.ndarray, root: int) -> np.ndarray:
+    """Every body after `root` [B, 3] relative to the root, in the root's heading frame:
+    what the body position error compares."""
+    return in_heading_frame(xpos[root + 1 :], xpos[root], xmat[root])
 
 
 def body_position_error(simulated: np.ndarray, reference: np.ndarray) -> tuple[float, float]:

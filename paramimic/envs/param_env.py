@@ -24,7 +24,12 @@ from scipy.spatial.transform import Rotation
 
 from paramimic.characters import Body
 from paramimic.characters.legs import leg_chains
-from paramimic.envs.core import EnvCore, bodies_in_heading_frame, body_position_error
+from paramimic.envs.core import (
+    EnvCore,
+    bodies_in_heading_frame,
+    body_position_error,
+    in_heading_frame,
+)
 from paramimic.envs.reward_normalization import RewardScales, reward_scales
 from paramimic.envs.rewards import (
     WL19Terms,
@@ -62,6 +67,8 @@ class ParamEnv(EnvCore):
                 raise ValueError(f"env.gait: clip gaits need a free root; {self.definition.name!r}")
             self._clip = self.registration.load_clip(self.config.gait, self.config.clip_texts)
             gait = self._clip_gait(self._base)
+        if self.config.reward.end_effector_frame == "heading" and self._clip is None:
+            raise ValueError("env.reward.end_effector_frame: heading needs a clip gait (env.gait)")
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
         self._gait = self.motion = gait if self.config.imitation else None
@@ -113,6 +120,7 @@ class ParamEnv(EnvCore):
         self._up = base.up_sensor.start + np.array(axes)
         self._obs_sensors = np.concatenate([np.arange(2 * nj), ee.ravel()])
         self._zero_reference = np.zeros(2 * nj + 3 * n_ee)
+        self._ee_heading = rc.end_effector_frame == "heading" and self.motion is not None
 
     def _bind(self, body: Body) -> None:
         super()._bind(body)
@@ -182,9 +190,15 @@ class ParamEnv(EnvCore):
         poses = self.motion.pose(phis)
         ee = np.empty((len(phis), len(c.ee_site_ids), 3))
         d.qpos[:] = m.qpos0
+        heading = self._ee_heading
         for k, pose in enumerate(poses):
+            if heading:  # the clip's own root orientation: its tilt is imitated
+                d.qpos[:7] = self.motion.root_qpos(float(phis[k]))
             d.qpos[c.qpos_idx] = pose
             mujoco.mj_kinematics(m, d)
+            if heading:
+                ee[k] = self._end_effectors_in_heading_frame()
+                continue
             # what the end-effector sensors measure: sites in the root's inertial frame (a
             # FRAMEPOS sensor's body reference); kinematics alone, no dynamics or collisions
             rot = d.ximat[c.root_body_id].reshape(3, 3)
@@ -216,6 +230,14 @@ class ParamEnv(EnvCore):
         k = int(x)
         rows, slopes = self._bodies
         return rows[k] + (x - k) * slopes[k]
+
+    def _end_effectors_in_heading_frame(self) -> np.ndarray:
+        """The end-effector sites [n_ee, 3] relative to the root, in its heading frame (yaw
+        removed, tilt kept): `reward.end_effector_frame: heading`."""
+        d, c = self.data, self.character
+        return in_heading_frame(
+            d.site_xpos[c.ee_site_ids], d.xpos[c.root_body_id], d.xmat[c.root_body_id]
+        )
 
     def _bodies_in_heading_frame(self) -> np.ndarray:
         """Every body but the root [B, 3] relative to the root, in its heading frame (yaw
@@ -494,6 +516,8 @@ class ParamEnv(EnvCore):
         s = d.sensordata
         n = self._ee.stop
         err = s[:n] - (self._zero_reference[:n] if ref is None else ref[:n])
+        if self._ee_heading:
+            err[self._ee] = self._end_effectors_in_heading_frame().ravel() - ref[self._ee]
         pose, velocity, ee = wl19_imitation(
             err[self._q],
             err[self._dq],
