@@ -83,6 +83,13 @@ class RewardConfig(Section):
         "the root in its heading frame (yaw removed, tilt kept, as DeepMimic's end-effector term): "
         "a clip that rolls the body over, the cartwheel, is then imitated as a whole",
     )
+    facing: Literal["target", "clip"] = Field(
+        "target",
+        description="Eq. 6's d′, the direction the facing term wants: target, the target "
+        "direction ([WL19]); clip, a clip gait's own root facing at this phase turned onto the "
+        "target direction, for a clip that does not face where it travels (the cartwheel faces "
+        "across its path and turns on the way; without it nothing holds the body's yaw)",
+    )
     combine: Literal["sum", "product"] = Field(
         "sum",
         description="sum: Eq. 4, the weighted mean of the bells; product: the bells multiplied "
@@ -831,6 +838,11 @@ class ExperimentConfig(Section):
             raise ValueError(
                 "env.reward.end_effector_frame: heading needs a clip gait (env.gait), whose "
                 "reference has a root orientation to imitate"
+            )
+        if self.env.reward.facing == "clip" and self.env.gait is None:
+            raise ValueError(
+                "env.reward.facing: clip needs a clip gait (env.gait), whose root facing the "
+                "facing term then follows"
             )
         if "target_direction" in self.task and character.planar:
             raise ValueError(

@@ -342,3 +342,31 @@ def test_end_effectors_in_the_heading_frame_imitate_the_bodys_tilt():
         ExperimentConfig.model_validate(
             {"character": "humanoid", "env": {"reward": {"end_effector_frame": "heading"}}}
         )
+
+
+def test_the_facing_term_follows_the_clips_own_facing():
+    """reward.facing: clip wants the clip's root facing at this phase (turned onto the target
+    direction) where [WL19]'s d′ is the target direction: the cartwheel, which faces across its
+    path, is paid for facing as its reference does and loses the term when its yaw turns away;
+    the target facing pays it for a yaw the clip never has."""
+    cartwheel = GAIT | {"gait": "humanoid_cartwheel", "target_direction": 0.7}
+    terms = {}
+    for facing in ("target", "clip"):
+        env = make_env("humanoid", {}, cartwheel | {"reward": {"facing": facing}})
+        env.reset(seed=5)
+        env._sense()
+        ref = env._reference_at(env._phase)
+        at_reference = env._reward(ref)[1]["direction"]
+        turn = Rotation.from_euler("z", 1.0)  # the whole body turned 57° about the vertical
+        rot = Rotation.from_quat(env.data.qpos[3:7], scalar_first=True)
+        env.data.qpos[3:7] = (turn * rot).as_quat(scalar_first=True)
+        mujoco.mj_forward(env.model, env.data)
+        env._sense()
+        terms[facing] = (at_reference, env._reward(ref)[1]["direction"], env.heading_error())
+    assert terms["clip"][0] == pytest.approx(1.0, abs=0.02)
+    assert terms["clip"][1] < 0.01 and terms["clip"][2] == pytest.approx(1.0, abs=0.05)
+    assert terms["target"][0] < 0.5  # the cartwheel does not face its target direction
+    with pytest.raises(ValidationError, match="facing: clip needs a clip gait"):
+        ExperimentConfig.model_validate(
+            {"character": "humanoid", "env": {"reward": {"facing": "clip"}}}
+        )

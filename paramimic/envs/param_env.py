@@ -69,6 +69,8 @@ class ParamEnv(EnvCore):
             gait = self._clip_gait(self._base)
         if self.config.reward.end_effector_frame == "heading" and self._clip is None:
             raise ValueError("env.reward.end_effector_frame: heading needs a clip gait (env.gait)")
+        if self.config.reward.facing == "clip" and self._clip is None:
+            raise ValueError("env.reward.facing: clip needs a clip gait (env.gait)")
         if self.config.imitation and gait is None:
             raise ValueError(f"character {self.definition.name!r} has no [WL19] gait to imitate")
         self._gait = self.motion = gait if self.config.imitation else None
@@ -144,6 +146,7 @@ class ParamEnv(EnvCore):
             legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
             self.motion = RetargetedGait(self._gait, legs)
         self._reference = self._tabulate_reference() if self.motion is not None else None
+        self._clip_facing = self._tabulate_facing() if self.config.reward.facing == "clip" else None
 
     def _clip_gait(self, body: Body) -> ClipGait:
         """The clip gait on `body` (its root path scaled by the body's hip height; with
@@ -209,6 +212,30 @@ class ParamEnv(EnvCore):
         if isinstance(self.motion, ClipGait):
             self._bodies = self._tabulate_bodies(phis)
         return list(table), list(np.diff(table, axis=0))
+
+    def _tabulate_facing(self) -> tuple[list, list]:
+        """`reward.facing: clip`: the clip gait's root facing (its x axis on the ground, unit
+        length) in the travel frame at φ = k/K, and the row differences."""
+        g = self._gait
+        rows = np.empty((REFERENCE_SAMPLES + 1, 2))
+        for k in range(REFERENCE_SAMPLES + 1):
+            x = g.root_rotation(k / REFERENCE_SAMPLES).as_matrix()[:2, 0]
+            rows[k] = x / (np.hypot(*x) or 1.0)
+        return list(rows), list(np.diff(rows, axis=0))
+
+    def _target_facing(self) -> tuple[float, float]:
+        """Eq. 6's d′: the target direction, or with `reward.facing: clip` the clip's root
+        facing at this phase turned onto the target direction (unit length)."""
+        if self._clip_facing is None:
+            return self._target_dir
+        x = (self._phase % 1.0) * REFERENCE_SAMPLES
+        k = int(x)
+        rows, slopes = self._clip_facing
+        fx, fy = rows[k] + (x - k) * slopes[k]
+        hx, hy = self._heading
+        dx, dy = hx * fx - hy * fy, hy * fx + hx * fy
+        norm = math.hypot(dx, dy) or 1.0
+        return dx / norm, dy / norm
 
     def _tabulate_bodies(self, phis: np.ndarray) -> tuple[list, list]:
         """A clip gait's reference root height and body positions relative to the root, in the
@@ -469,14 +496,14 @@ class ParamEnv(EnvCore):
 
     def heading_error(self) -> float | None:
         """The angle (rad, 0-π) between a free body's facing direction (the root's x axis in the
-        ground plane) and its target direction; None for a planar body or one facing straight
-        up or down."""
+        ground plane) and the one it should face (Eq. 6's d′, `_target_facing`); None for a
+        planar body or one facing straight up or down."""
         if not self._free:
             return None
         fx, fy = self._facing()
         if fx == fy == 0.0:
             return None
-        dx, dy = self._target_dir
+        dx, dy = self._target_facing()
         return math.acos(max(-1.0, min(1.0, fx * dx + fy * dy)))
 
     def _facing(self) -> tuple[float, float]:
@@ -527,10 +554,11 @@ class ParamEnv(EnvCore):
             rc.sigma_end_effector,
         )
         fx, fy = self._facing()  # d, against d′
+        dx, dy = self._target_facing()
         vx, vy, _ = self._com_vel
         com, direction = wl19_task(
             (vx - self._target_vel[0], vy - self._target_vel[1]),
-            (fx - self._target_dir[0], fy - self._target_dir[1]),
+            (fx - dx, fy - dy),
             rc.sigma_com_velocity,
             rc.sigma_direction,
             self._scales.direction,
