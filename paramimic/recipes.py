@@ -49,6 +49,7 @@ PRESETS: dict[str, dict[str, Setting]] = {
         "env.reward.normalize": _s(True, "[WL19] §4.3, Table 1"),
         "env.ground_fit": _s(True, "[WL19] Eq. 1"),
         "env.reward.end_effector_frame": _s("root", "[WL19] §4.1 (the root joint's coordinates)"),
+        "env.reward.facing": _s("target", "[WL19] Eq. 6 (d′, the target direction)"),
         "env.retarget": _s(False, OURS_OFF),
         "env.stall_speed_ratio": _s(None, OURS_OFF),
         "env.heading_error_limit": _s(None, OURS_OFF),

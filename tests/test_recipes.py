@@ -37,6 +37,7 @@ def test_the_papers_settings_as_the_papers_state_them():
     assert l21.curriculum.p_mcmc == 5 and l21.env.skill.rsi == 0.0
     assert wl19.env.stable_pd and l21.env.stable_pd  # [WL19] Eq. 3; [L21] §7's stable PD
     assert wl19.env.reward.end_effector_frame == "root"  # [WL19] §4.1: the root joint's frame
+    assert wl19.env.reward.facing == "target"  # [WL19] Eq. 6: d′ is the target direction
     assert not ExperimentConfig.model_validate({"character": "walker"}).env.stable_pd
 
 
