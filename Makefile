@@ -59,7 +59,8 @@ test: $(VENV)/.installed-test gl test-deps
 	$(BIN)/ruff check paramimic services tests benchmarks docs/hooks
 	# --strict: a broken link, a missing page or a number no benchmark wrote fails the build
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
-	$(BIN)/python -m pytest tests --durations=15
+	# two workers; the tests that start a Ray cluster run one at a time (tests/conftest.py)
+	$(BIN)/python -m pytest tests -n 2 --dist loadgroup --durations=15
 
 # the documentation site at http://127.0.0.1:8001 while you edit docs/
 docs: $(VENV)/.installed-test

@@ -42,6 +42,7 @@ class EpisodeResult:
     # achieved (every one within its σ_task, the clip completed, no fall)
     task_errors: dict[str, float] | None = None
     achieved: bool | None = None
+    facing_error: float | None = None  # clip gaits: mean angle from the clip's facing (rad)
 
 
 Act = Callable[[np.ndarray], np.ndarray]  # observations [n, obs] -> actions [n, A]
@@ -132,7 +133,7 @@ def run_episodes(
         o, _ = envs[j].reset(seed=int(rng.integers(2**31 - 1)), options=options)
         obs[j] = o
         slots[j] = {"k": k, "ret": 0.0, "task": 0.0, "len": 0, "x0": float(envs[j].data.qpos[0])}
-        slots[j] |= {"error": 0.0, "drift": 0.0}
+        slots[j] |= {"error": 0.0, "drift": 0.0, "facing": 0.0}
 
     for j in range(len(envs)):
         start(j)
@@ -152,6 +153,7 @@ def run_episodes(
             if not info["diverged"]:
                 s["error"] += env.body_error()[0] if bodies else 0.0
                 s["drift"] += env.root_drift() if path else 0.0
+                s["facing"] += env.facing_error() if path else 0.0
             if te or tr:
                 fell = bool(info["fell"] or info["diverged"])  # a completed clip also ends
                 errors = env.task_errors() if getattr(env, "measured", None) else None
@@ -174,6 +176,7 @@ def run_episodes(
                     getattr(env, "target_speed", None),
                     errors,
                     achieved,
+                    facing_error=s["facing"] / s["len"] if path else None,
                 )
                 start(j)
     return [r for r in results if r is not None]
@@ -253,6 +256,7 @@ def _tracking(results: list[EpisodeResult], speeds: np.ndarray) -> dict:
     clip = np.array([r.clip_speed for r in results])
     return out | {
         "mean_root_drift": float(np.mean([r.root_drift for r in results])),
+        "mean_facing_error": float(np.mean([r.facing_error for r in results])),
         "clip_speed": float(clip.mean()),
         "speed_ratio": float(np.mean(speeds / clip)),
     }

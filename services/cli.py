@@ -317,6 +317,7 @@ def evaluate_cmd(
         "achieved_share",
         "mean_body_error",  # clip gaits (env.gait)
         "mean_root_drift",
+        "mean_facing_error",
         "speed_ratio",
     )
     shown = {k: round(report[k], 3) for k in keys if k in report}

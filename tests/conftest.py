@@ -183,10 +183,25 @@ needs_browser = pytest.mark.skipif(
 )
 
 
+# `make test` runs the suite on two xdist workers (`-n 2 --dist loadgroup`): the tests that start
+# a Ray cluster (the local_ray fixture, `paramimic train` on Ray, the compose cluster) form one
+# group, which one worker runs one test at a time, as a plain `pytest` does; the rest spread over
+# both workers. Two clusters at once on two cores would only starve each other.
+RAY_FIXTURES = frozenset({"local_ray", "distributed"})
+RAY_MODULES = frozenset(
+    {"test_cli", "test_compose", "test_dashboard", "test_launch", "test_multinode",
+     "test_ray_private"}
+)  # fmt: skip
+
+
 def pytest_collection_modifyitems(items):
     for item in items:
-        if "browser" in getattr(item, "fixturenames", ()):
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if "browser" in fixtures:
             item.add_marker(needs_browser)
+        module = item.module.__name__.rpartition(".")[2] if item.module else ""
+        if fixtures & RAY_FIXTURES or module in RAY_MODULES:
+            item.add_marker(pytest.mark.xdist_group("ray"))
 
 
 @pytest.fixture(scope="session")

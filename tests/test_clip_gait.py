@@ -125,6 +125,7 @@ def test_reset_starts_at_a_random_phase_in_the_clips_pose_and_velocity():
         # the reference itself: no body error, no drift
         assert env.body_error()[1] == pytest.approx(0.0, abs=5e-3)  # (tables' interpolation)
         assert env.root_drift() == pytest.approx(0.0, abs=1e-9)
+        assert env.facing_error() == pytest.approx(0.0, abs=1e-3)
     assert len(phases) == 4
 
 
@@ -190,6 +191,7 @@ def test_evaluation_reports_the_imitation_measures():
     assert report["clip_speed"] == pytest.approx(speed, rel=1e-6)
     assert 0 < report["mean_body_error"] < 0.5
     assert report["mean_root_drift"] >= 0
+    assert 0 <= report["mean_facing_error"] <= math.pi
     assert report["speed_ratio"] == pytest.approx(report["mean_forward_speed"] / speed)
     assert report["speed_over_target"] == pytest.approx(report["speed_ratio"])  # the base body
     assert 0.0 <= report["on_target_share"] <= 1.0
@@ -365,6 +367,7 @@ def test_the_facing_term_follows_the_clips_own_facing():
         terms[facing] = (at_reference, env._reward(ref)[1]["direction"], env.heading_error())
     assert terms["clip"][0] == pytest.approx(1.0, abs=0.02)
     assert terms["clip"][1] < 0.01 and terms["clip"][2] == pytest.approx(1.0, abs=0.05)
+    assert env.facing_error() == pytest.approx(1.0, abs=0.05)  # the turn, whatever the reward
     assert terms["target"][0] < 0.5  # the cartwheel does not face its target direction
     with pytest.raises(ValidationError, match="facing: clip needs a clip gait"):
         ExperimentConfig.model_validate(

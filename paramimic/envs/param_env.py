@@ -146,7 +146,6 @@ class ParamEnv(EnvCore):
             legs = leg_chains(self.definition, body.segment_lengths, base.segment_lengths)
             self.motion = RetargetedGait(self._gait, legs)
         self._reference = self._tabulate_reference() if self.motion is not None else None
-        self._clip_facing = self._tabulate_facing() if self.config.reward.facing == "clip" else None
 
     def _clip_gait(self, body: Body) -> ClipGait:
         """The clip gait on `body` (its root path scaled by the body's hip height; with
@@ -213,25 +212,17 @@ class ParamEnv(EnvCore):
             self._bodies = self._tabulate_bodies(phis)
         return list(table), list(np.diff(table, axis=0))
 
-    def _tabulate_facing(self) -> tuple[list, list]:
-        """`reward.facing: clip`: the clip gait's root facing (its x axis on the ground, unit
-        length) in the travel frame at φ = k/K, and the row differences."""
-        g = self._gait
-        rows = np.empty((REFERENCE_SAMPLES + 1, 2))
-        for k in range(REFERENCE_SAMPLES + 1):
-            x = g.root_rotation(k / REFERENCE_SAMPLES).as_matrix()[:2, 0]
-            rows[k] = x / (np.hypot(*x) or 1.0)
-        return list(rows), list(np.diff(rows, axis=0))
-
     def _target_facing(self) -> tuple[float, float]:
         """Eq. 6's d′: the target direction, or with `reward.facing: clip` the clip's root
         facing at this phase turned onto the target direction (unit length)."""
-        if self._clip_facing is None:
+        if self.config.reward.facing == "target":
             return self._target_dir
-        x = (self._phase % 1.0) * REFERENCE_SAMPLES
-        k = int(x)
-        rows, slopes = self._clip_facing
-        fx, fy = rows[k] + (x - k) * slopes[k]
+        return self.clip_facing()
+
+    def clip_facing(self) -> tuple[float, float]:
+        """A clip gait's root facing at this phase turned onto the target direction (unit
+        length): where its reference faces now."""
+        fx, fy = self._gait.root_facing(self._phase)
         hx, hy = self._heading
         dx, dy = hx * fx - hy * fy, hy * fx + hx * fy
         norm = math.hypot(dx, dy) or 1.0
@@ -498,12 +489,20 @@ class ParamEnv(EnvCore):
         """The angle (rad, 0-π) between a free body's facing direction (the root's x axis in the
         ground plane) and the one it should face (Eq. 6's d′, `_target_facing`); None for a
         planar body or one facing straight up or down."""
-        if not self._free:
-            return None
+        return self._angle_to(*self._target_facing()) if self._free else None
+
+    def facing_error(self) -> float:
+        """A clip gait's angle (rad, 0-π) between the body's facing and the clip's own facing
+        at this phase (`clip_facing`), whatever the reward's facing term wants: how far the
+        body's yaw has turned from its reference's (0 for a body facing straight up or down)."""
+        return self._angle_to(*self.clip_facing()) or 0.0
+
+    def _angle_to(self, dx: float, dy: float) -> float | None:
+        """The angle (rad, 0-π) between the facing direction and the unit vector (dx, dy);
+        None when the root's x axis is vertical."""
         fx, fy = self._facing()
         if fx == fy == 0.0:
             return None
-        dx, dy = self._target_facing()
         return math.acos(max(-1.0, min(1.0, fx * dx + fy * dy)))
 
     def _facing(self) -> tuple[float, float]:

@@ -16,6 +16,7 @@ joint's Euler angle crossing ±π is no velocity spike.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -45,6 +46,7 @@ class ClipGait:
     _dq: np.ndarray  # [K+1, J] rad/s
     _root_z: np.ndarray  # [K+1]
     _root_quat: np.ndarray  # [K+1, 4] x, y, z, w; travel along +x, net turn removed
+    _root_facing: np.ndarray  # [K+1, 2] the root's x axis on the ground (unit), travel frame
     _root_vel: np.ndarray  # [K+1, 3] world (travel frame), m/s
     _root_omega: np.ndarray  # [K+1, 3] local frame, rad/s (a free joint's qvel[3:6])
     _root_xy: np.ndarray  # [K+1, 2] in the travel frame, from the first frame's root
@@ -106,6 +108,8 @@ class ClipGait:
         # row K is row 0 of the next cycle)
         ring = Rotation.concatenate([root_rot[-2:-1], root_rot, root_rot[1:2]])
         omega = (ring[:-2].inv() * ring[2:]).as_rotvec() / (2.0 * h * T)
+        facing = root_rot.apply([1.0, 0.0, 0.0])[:, :2]
+        facing /= np.maximum(np.hypot(facing[:, 0], facing[:, 1]), 1e-9)[:, None]
         names = tuple(joints)
         if len(names) != q.shape[1]:
             raise ValueError(f"{len(names)} joint names for {q.shape[1]} joint angles")
@@ -118,6 +122,7 @@ class ClipGait:
             _dq=dq,
             _root_z=qpos[:, 2].copy(),
             _root_quat=root_rot.as_quat(),
+            _root_facing=facing,
             _root_vel=lin,
             _root_omega=omega,
             _root_xy=root_xy,
@@ -153,6 +158,13 @@ class ClipGait:
         b = -b if a @ b < 0 else b
         q = a + (x - k) * (b - a)
         return Rotation.from_quat(q / np.linalg.norm(q))
+
+    def root_facing(self, phi: float) -> tuple[float, float]:
+        """The root's facing at φ (its x axis on the ground, unit length) in the travel frame:
+        (1, 0) for a clip that faces where it travels; the cartwheel faces across its path."""
+        fx, fy = self._lookup(self._root_facing, phi)
+        norm = math.hypot(fx, fy) or 1.0
+        return fx / norm, fy / norm
 
     def root_velocity(self, phi: float) -> tuple[np.ndarray, np.ndarray]:
         """(linear velocity in the travel frame [3], angular velocity in the root's frame [3])."""
