@@ -645,6 +645,7 @@ def main() -> None:
     e.add_argument("run", type=Path)
     e.add_argument("--episodes", type=int, default=100)
     e.add_argument("--seed", type=int, default=7)
+    e.add_argument("--out", type=Path, help="default: RESULTS/<config>_s<seed>_<steps>k.json")
     sub.add_parser("table")
     sk = sub.add_parser("skill")
     sk.add_argument("run", type=Path)
@@ -687,7 +688,8 @@ def main() -> None:
     if args.cmd == "eval":
         r = evaluate_run(args.run, args.episodes, args.seed)
         name = f"{r['config']}_s{r['train_seed']}_{r['env_steps'] // 1000}k.json"
-        (RESULTS / name).write_text(json.dumps(r, indent=2))
+        out = args.out or RESULTS / name
+        out.write_text(json.dumps(r, indent=2))
         rep = r["report"]
         print(
             f"{r['config']} seed {r['train_seed']} at {r['env_steps']:,} steps "
@@ -695,7 +697,7 @@ def main() -> None:
             f"body error {rep['mean_body_error']:.3f} m, speed {rep['speed_ratio']:.2f}x the "
             f"clip's, drift {rep['mean_root_drift']:.2f} m; met: {r['met']} {r['checks']}"
         )
-        print(f"wrote {RESULTS / name}")
+        print(f"wrote {out}")
     else:
         print(json.dumps(table(), indent=2))
 
