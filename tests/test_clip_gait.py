@@ -316,6 +316,20 @@ def test_deviated_episodes_are_reported_as_such_not_as_falls():
     assert f.episodes[0].to_dict()["deviated"] == f.episodes[0].deviated
 
 
+def _term_before_and_after_a_turn(env, term: str, turn: Rotation, seed: int):
+    """A clip gait's reward term in its reference state at a random phase, and again after the
+    whole body is turned by `turn` (joints kept); the env is left turned."""
+    env.reset(seed=seed)
+    env._sense()
+    ref = env._reference_at(env._phase)
+    before = env._reward(ref)[1][term]
+    rot = Rotation.from_quat(env.data.qpos[3:7], scalar_first=True)
+    env.data.qpos[3:7] = (turn * rot).as_quat(scalar_first=True)
+    mujoco.mj_forward(env.model, env.data)
+    env._sense()
+    return before, env._reward(ref)[1][term]
+
+
 def test_end_effectors_in_the_heading_frame_imitate_the_bodys_tilt():
     """reward.end_effector_frame: heading compares the end-effectors relative to the root in its
     heading frame, so a body that leans away from its reference loses the term; in the root's
@@ -324,16 +338,8 @@ def test_end_effectors_in_the_heading_frame_imitate_the_bodys_tilt():
     ee = {}
     for frame in ("root", "heading"):
         env = make_env("humanoid", {}, cartwheel | {"reward": {"end_effector_frame": frame}})
-        env.reset(seed=3)
-        env._sense()
-        ref = env._reference_at(env._phase)
-        at_reference = env._reward(ref)[1]["end_effector"]
         lean = Rotation.from_euler("y", 1.0)  # 57° about the world's y axis, joints kept
-        rot = Rotation.from_quat(env.data.qpos[3:7], scalar_first=True)
-        env.data.qpos[3:7] = (lean * rot).as_quat(scalar_first=True)
-        mujoco.mj_forward(env.model, env.data)
-        env._sense()
-        ee[frame] = (at_reference, env._reward(ref)[1]["end_effector"])
+        ee[frame] = _term_before_and_after_a_turn(env, "end_effector", lean, seed=3)
     n_ee = len(env.character.ee_site_ids)
     for frame in ee:  # the reference state matches its reference in both frames
         assert ee[frame][0] == pytest.approx(n_ee, abs=0.05)
@@ -355,16 +361,11 @@ def test_the_facing_term_follows_the_clips_own_facing():
     terms = {}
     for facing in ("target", "clip"):
         env = make_env("humanoid", {}, cartwheel | {"reward": {"facing": facing}})
-        env.reset(seed=5)
-        env._sense()
-        ref = env._reference_at(env._phase)
-        at_reference = env._reward(ref)[1]["direction"]
         turn = Rotation.from_euler("z", 1.0)  # the whole body turned 57° about the vertical
-        rot = Rotation.from_quat(env.data.qpos[3:7], scalar_first=True)
-        env.data.qpos[3:7] = (turn * rot).as_quat(scalar_first=True)
-        mujoco.mj_forward(env.model, env.data)
-        env._sense()
-        terms[facing] = (at_reference, env._reward(ref)[1]["direction"], env.heading_error())
+        terms[facing] = (
+            *_term_before_and_after_a_turn(env, "direction", turn, seed=5),
+            env.heading_error(),
+        )
     assert terms["clip"][0] == pytest.approx(1.0, abs=0.02)
     assert terms["clip"][1] < 0.01 and terms["clip"][2] == pytest.approx(1.0, abs=0.05)
     assert env.facing_error() == pytest.approx(1.0, abs=0.05)  # the turn, whatever the reward
