@@ -36,8 +36,13 @@ def test_the_papers_settings_as_the_papers_state_them():
     assert (l21.ppo.policy_lr, l21.ppo.value_lr, l21.ppo.minibatch_size) == (2e-4, 1e-3, 1024)
     assert l21.curriculum.p_mcmc == 5 and l21.env.skill.rsi == 0.0
     assert wl19.env.stable_pd and l21.env.stable_pd  # [WL19] Eq. 3; [L21] §7's stable PD
-    assert wl19.env.reward.end_effector_frame == "root"  # [WL19] §4.1: the root joint's frame
-    assert wl19.env.reward.facing == "target"  # [WL19] Eq. 6: d′ is the target direction
+    # [WL19] §4.1: the root joint's frame; Eq. 6: d′ is the target direction. Both are also the
+    # library defaults, so the preset itself must hold them, or a default changed later would
+    # silently change the paper's recipe
+    assert wl19.env.reward.end_effector_frame == "root" and wl19.env.reward.facing == "target"
+    held = {k: s.value for k, s in PRESETS["wl19"].items() if k.startswith("env.reward.")}
+    assert held["env.reward.end_effector_frame"] == "root"
+    assert held["env.reward.facing"] == "target"
     assert not ExperimentConfig.model_validate({"character": "walker"}).env.stable_pd
 
 
