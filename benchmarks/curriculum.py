@@ -68,7 +68,7 @@ def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dic
                 "stage": s.stage,
                 "mean_return": m.get("mean_return"),
                 "fall_percent": m.get("fall_percent"),
-                "elite_mean_fitness": s["elite_mean_fitness"],
+                "elite_mean_fitness": s.elite_mean_fitness,
             }
         )
         last = curve[-1]
