@@ -1,0 +1,36 @@
+"""benchmarks/curriculum.py ([L21] Fig. 8): one short run of each §7.3 curriculum through the
+benchmark's own code, so a change of the library's types breaks a test and not a long study."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _benchmark():
+    spec = importlib.util.spec_from_file_location(
+        "curriculum_bench", ROOT / "benchmarks" / "curriculum.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("sampling", ["mastering", "alternating"])
+def test_a_short_run_records_er_against_episodes_and_its_elites(tmp_path, sampling):
+    bench = _benchmark()
+    out = bench.run("configs/walker_jump.yaml", sampling, 8192, 0, tmp_path / sampling)
+    assert out["sampling"] == sampling and out["steps"] == 8192
+    curve = out["curve"]
+    iterations = [p["iteration"] for p in curve]
+    assert len(curve) >= 2 and iterations == sorted(set(iterations))
+    episodes = [p["episodes"] for p in curve]
+    assert episodes == sorted(episodes) and episodes[-1] > 0
+    assert all(0.0 <= p["explored_ratio"] <= 1.0 for p in curve)
+    assert curve[-1]["env_steps"] >= 8192
+    assert set(out["elites"]) == {"names", "params", "fitness", "ranges"}
+    # ER at common episode counts, per curriculum, over the two kinds of run
+    both = bench.compare([out, out | {"sampling": "uniform"}])
+    assert set(both["explored_ratio"]) == {sampling, "uniform"}
