@@ -1,5 +1,5 @@
-"""benchmarks/curriculum.py ([L21] Fig. 8): one short run of each §7.3 curriculum through the
-benchmark's own code, so a change of the library's types breaks a test and not a long study."""
+"""benchmarks/curriculum.py ([L21] Fig. 8): a short run of two §7.3 curricula (those with a phase
+clock) through its own code: a change of the library's types breaks a test, not a study."""
 
 import importlib.util
 from pathlib import Path
