@@ -12,9 +12,10 @@ Writes benchmarks/results/curriculum/curriculum.json (per run: N, ER, elites, ph
 the ER of each run at common N; the ratio curriculum / uniform) and
 benchmarks/results/curriculum/curriculum.png.
 Each run is the serial backend in its own process; --jobs runs that many at once (default 2,
-one per core: the learner uses one torch thread). Each finished run is kept in
-benchmarks/results/curriculum/runs/<sampling>_s<seed>_<steps>.json and not run again, so seeds
-can be added later (`--seeds 0,1,2` reruns only the missing ones) and the comparison covers them.
+one per core; with more than one job each learner uses one torch thread). Each finished run is
+kept in benchmarks/results/curriculum/runs/<sampling>_s<seed>_<steps>.json and not run again,
+so seeds can be added later (`--seeds 0,1,2` reruns only the missing ones) and the comparison
+covers them.
 """
 
 from __future__ import annotations
@@ -32,7 +33,11 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "curriculum"
 
 
-def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dict:
+def run(
+    config: str, sampling: str, steps: int, seed: int, run_dir: Path, threads: int | None = None
+) -> dict:
+    """One serial run of `sampling`; `threads`: the learner's torch threads (one per run when
+    runs share the machine; default: the config's, every core for a serial trainer)."""
     import torch
 
     from paramimic.config import load_config
@@ -45,7 +50,8 @@ def run(config: str, sampling: str, steps: int, seed: int, run_dir: Path) -> dic
             "train.seed": seed,
             "train.run_dir": str(run_dir),
             "train.checkpoint_every": 1_000_000,
-        },
+        }
+        | ({"train.torch_threads": threads} if threads else {}),
     )
     torch.manual_seed(seed)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -199,6 +205,7 @@ def main() -> None:
             args.steps,
             seed,
             ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}",
+            1 if args.jobs > 1 else None,
         )
         for seed in seeds
         for sampling in samplings
