@@ -37,7 +37,10 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 OUT = RESULTS / "reproduce"
 DOCS = ROOT / "docs" / "reproduce.md"
+RUNS = ROOT / "runs" / "reproduce"
 EVAL_SEED = 10_000  # + the training seed: shapes the training never drew
+# [WL19] Table 4's evaluation: 300 bodies, falls within 30 s; Fig. 6's 7 x 7 grid of shapes
+EVAL = {"bodies": 300, "seconds": 30.0, "grid": 7}
 
 # row -> what it reproduces, the config, its variants (overrides), the paper's recipe, the
 # budget per run in env steps, what is measured, and the paper's numbers per variant
@@ -135,7 +138,7 @@ def run_one(
     spec = ROWS[row]
     config, overrides = spec["variants"][variant]
     arm_overrides = paper_settings(spec["recipe"]) if arm == "paper" else {}
-    run_dir = ROOT / "runs" / "reproduce" / row / arm / f"{variant}_s{seed}"
+    run_dir = RUNS / row / arm / f"{variant}_s{seed}"
     cfg = load_config(
         ROOT / config,
         arm_overrides
@@ -151,7 +154,8 @@ def run_one(
            "overrides": arm_overrides | overrides, "env_steps": trainer.progress.env_steps,
            "train_seconds": seconds}  # fmt: skip
     if spec["measure"] == "family":
-        report = evaluate_config(trainer.learner.policy, cfg, 300, EVAL_SEED + seed, 7, 30.0)
+        report = evaluate_config(trainer.learner.policy, cfg, EVAL["bodies"], EVAL_SEED + seed,
+                                 EVAL["grid"], EVAL["seconds"])  # fmt: skip
         grid = report.pop("grid")
         out["report"] = report | {"grid_uniformity": grid["uniformity"]}
     else:

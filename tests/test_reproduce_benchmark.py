@@ -1,0 +1,67 @@
+"""benchmarks/reproduce.py (paper against us, row by row): one short run of a [WL19] row at the
+paper's settings and one of an [L21] row, each evaluated as the row measures it, and the table
+written from their JSON, through the benchmark's own code (budgets and evaluation shrunk)."""
+
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+
+from paramimic.training import checkpoint
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _benchmark():
+    spec = importlib.util.spec_from_file_location(
+        "reproduce_bench", ROOT / "benchmarks" / "reproduce.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_row_at_the_papers_settings_is_kept_and_tabled(tmp_path, monkeypatch):
+    bench = _benchmark()
+    monkeypatch.setattr(bench, "OUT", tmp_path / "results")
+    monkeypatch.setattr(bench, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(bench, "EVAL", {"bodies": 3, "seconds": 1.0, "grid": 2})
+    docs = tmp_path / "reproduce.md"
+    shutil.copy(bench.DOCS, docs)
+    monkeypatch.setattr(bench, "DOCS", docs)
+
+    # [WL19] Table 4, RN off, at [WL19]'s settings: the variant's switch beside the recipe's
+    out = bench.run_one("wl19_table4", "paper", "quadruped_no_rn", 0, 4096, threads=1)
+    assert out["overrides"]["recipe"] == "wl19"
+    assert out["overrides"]["env.reward.normalize"] is False
+    assert out["env_steps"] >= 4096
+    report = out["report"]
+    assert 0.0 <= report["fall_percent"] <= 100.0
+    assert "coefficient_of_variation" in report["grid_uniformity"]
+    run_dir = tmp_path / "runs" / "wl19_table4" / "paper" / "quadruped_no_rn_s0"
+    used = checkpoint.load(checkpoint.resolve(run_dir))["config"]
+    assert used["env"]["physics_hz"] == 600  # [WL19] Table 2, where quadruped.yaml says 300
+    assert used["env"]["reward"]["normalize"] is False
+    assert used["ppo"]["minibatch_size"] == 128
+    kept = bench.result_path("wl19_table4", "paper", "quadruped_no_rn", 0, 4096)
+    assert json.loads(kept.read_text())["report"] == report
+
+    # [L21] Table 2's A1 in our arm: the explored range of the elites
+    a1 = bench.run_one("l21_table2", "ours", "A1", 0, 4096, threads=1)
+    assert a1["overrides"] == {"curriculum.skill.motion_parameterization": False}
+    assert 0.0 <= a1["report"]["explored_ratio"] <= 1.0
+    assert set(a1["report"]["ranges"]) == {"gravity", "jump_height"}
+
+    body = bench.table()
+    line = next(x for x in body.splitlines() if "quadruped_no_rn" in x)
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[3].startswith(f"{report['task_achievement']:.1f} task")  # the paper's settings
+    assert cells[4] == "not run yet"  # ours: not run
+    assert "gravity" in next(x for x in body.splitlines() if "| A1 " in x)
+    written = docs.read_text()
+    assert body in written and "<!-- /rows -->" in written
+    summary = json.loads((tmp_path / "results" / "reproduce.json").read_text())
+    assert (
+        summary["header"][3] == "paper's settings"
+        and len(summary["rows"]) == len(body.splitlines()) - 2
+    )
