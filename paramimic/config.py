@@ -459,7 +459,7 @@ class SkillCurriculumConfig(Section):
             description="the curricula of [L21] §7.3: curriculum (ours, §6's phase rule), "
             "uniform (the baseline: random task parameters), exploration_only (explore until "
             "ER reaches `exploration_complete`, then refine), mastering (refine until the "
-            "visited region's mean V̄ reaches `mastery_threshold` of V̄(a0) or "
+            "visited region's mean V̄ stops rising (`mastery_threshold`, `mastery_window`) or "
             "`phase_timeout` updates pass), alternating (`phase_updates` policy updates per "
             "phase)",
         )
@@ -468,10 +468,14 @@ class SkillCurriculumConfig(Section):
         20, ge=1, description="alternating: policy updates per phase ([L21] §7.3: 20)"
     )
     mastery_threshold: float = Field(
-        0.9,
+        0.01,
         gt=0,
-        description="mastering: refinement ends once the mean V̄ over the live elites is this "
-        "share of V̄ at the reference a0 (ours; [L21] §7.3 gives no number)",
+        description="mastering: refinement ends once the mean V̄ over the live elites (the "
+        "visited skills) rose by less than this share of itself over the last "
+        "`mastery_window` policy updates (ours; [L21] §7.3 gives no number)",
+    )
+    mastery_window: int = Field(
+        10, ge=1, description="mastering: policy updates over which the rise is measured (ours)"
     )
     phase_timeout: int = Field(
         100, ge=1, description="mastering: policy updates a phase lasts at most (ours; "

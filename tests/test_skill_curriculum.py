@@ -242,14 +242,31 @@ def test_the_phase_clock_starts_after_pi0_and_survives_a_state_round_trip():
     assert (d.phase.phase, d.phase.started, d.phase.rule) == ("exploration", 15, "alternating")
 
 
-def test_mastery_is_the_visited_skills_mean_marginal_value_against_the_reference():
-    c = make(sampling="mastering", mastery_threshold=0.9)
-    # V̄(a) = 1 − x_gravity on the scaled box (x = 2g − 1): 1 at a0 (g = 0.5), 0.4 at g = 0.8
-    c.update_marginal([[np.array([[-1.0], [0.0]]), np.ones(1)]], 1.0, 0, refill=False)
-    assert not c.mastered()  # no elites yet
-    c.ingest([episode(0, (0.8, 0.5), 0.9, trace_value=1.0)])
-    assert not c.mastered()  # 0.4 < 0.9 x 1
-    c.ingest([episode(1, (0.5, 0.2), 0.9, trace_value=1.0)])  # V̄ 1.0: mean 0.7
+def test_mastering_refines_while_the_visited_skills_mean_marginal_value_still_rises():
+    """[L21] §7.3's mastering: refinement ends once the mean V̄ over the visited skills (the
+    live elites) rose by less than `mastery_threshold` of itself over `mastery_window` policy
+    updates; the record starts anew with each phase and survives a state round trip."""
+    c = make(sampling="mastering", mastery_threshold=0.01, mastery_window=3, phase_timeout=100)
+    c.update_motion(None, 0, None, "proxy")
+    c.ingest([episode(0, (0.8, 0.5), 0.9, trace_value=1.0)])  # one visited skill at g = 0.8
+
+    def v_bar(at_elite):  # V̄(a) = w x_gravity + 1 on the scaled box (x = 2g − 1 = 0.6 there)
+        return [[np.array([[(at_elite - 1.0) / 0.6], [0.0]]), np.ones(1)]]
+
+    c.update_marginal(v_bar(1.0), 1.0, 0, refill=False)
+    c.phase.switch(0)  # refinement, as the exploration rates would switch it
+    assert c.phase.phase == "refinement" and c.phase.progress == []
+    rising = [1.0, 1.1, 1.2, 1.3, 1.4]  # 10 % an update: still mastering the region
+    for it, v in enumerate(rising, start=1):
+        c.update_marginal(v_bar(v), 1.0, it, refill=False)
+        assert c.phase.phase == "refinement"
+    assert c.phase.progress == pytest.approx(rising)
+    d = make(sampling="mastering", mastery_threshold=0.01, mastery_window=3)
+    d.from_state(json.loads(json.dumps(c.to_state())))
+    assert d.phase.progress == pytest.approx(rising) and d.phase.phase == "refinement"
+    for it, v in enumerate([1.405, 1.41], start=6):  # 1.3 -> 1.405: 8 % over 3 updates
+        c.update_marginal(v_bar(v), 1.0, it, refill=False)
+    assert c.phase.phase == "refinement"
+    c.update_marginal(v_bar(1.412), 1.0, 8, refill=False)  # 1.4 -> 1.412: 0.9 % over 3
+    assert c.phase.phase == "exploration" and c.phase.progress == [] and c.phase.started == 8
     assert not c.mastered()
-    c.update_marginal([[np.array([[-0.1], [0.0]]), np.ones(1)]], 1.0, 1, refill=False)
-    assert c.mastered()  # V̄ 0.94 and 1.0: mean 0.97 >= 0.9

@@ -9,7 +9,7 @@ bandwidth) is our default. Regions: visited A_h (density ≥ D = 0.8), surroundi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -86,8 +86,8 @@ class PhaseSwitch:
     - `exploration_only`: exploration until ER reaches the config's `exploration_complete`,
       then refinement for good.
     - `mastering`: exploration ends as ours does; refinement ends once the skills of the
-      visited region are mastered (the caller's test) — each phase ends at its timeout at the
-      latest.
+      visited region are mastered (the caller's test, on `progress`: the caller's measure of
+      them at each policy update of the phase) — each phase ends at its timeout at the latest.
     - `alternating`: a fixed number of policy updates per phase.
     `started` is the policy update (the learner's iteration) at which the phase began."""
 
@@ -98,6 +98,7 @@ class PhaseSwitch:
     switches: int = 0
     rule: str = "curriculum"
     started: int = 0
+    progress: list[float] = field(default_factory=list)
 
     def observe(self, region: str, rate: float, iteration: int = 0) -> str:
         """Record the exploration rate of a batch drawn in `region`; returns the phase."""
@@ -144,6 +145,7 @@ class PhaseSwitch:
         self.phase = "refinement" if self.phase == "exploration" else "exploration"
         self.switches += 1
         self.started = iteration
+        self.progress = []
 
 
 def _ema(old: float | None, new: float, smoothing: float) -> float:

@@ -297,39 +297,49 @@ class SkillCurriculum(AdaptiveCurriculum):
         if self.phase.phase != before:
             self.stats["phase_switches"] = self.stats.get("phase_switches", 0) + 1
 
-    def _tick(self) -> None:
-        """The rules on the clock, ER and mastery; their clock starts when π0 is done."""
+    def _tick(self, update: bool = False) -> None:
+        """The rules on the clock, ER and mastery; their clock starts when π0 is done.
+        `update`: called at a policy update (mastering measures the visited skills then)."""
         if self.stage == "base" or self.sc.sampling == "uniform":
             self.phase.started = max(self.marginal_iteration, 0)
             return
         sc, before = self.sc, self.phase.phase
         er = self.history[-1][1] if self.history else None
-        mastered = sc.sampling == "mastering" and before == "refinement" and self.mastered()
+        refining = sc.sampling == "mastering" and before == "refinement"
+        if refining and update:
+            value = self.visited_value()
+            if value is not None:
+                self.phase.progress.append(value)
         self.phase.tick(
             self.marginal_iteration,
             er,
-            mastered,
+            refining and self.mastered(),
             sc.phase_updates,
             sc.phase_timeout,
             sc.exploration_complete,
         )
         self._count_switch(before)
 
-    def mastered(self) -> bool:
-        """The mastering curriculum's test: the mean V̄ over the live elites (the visited
-        region's skills) is at least `mastery_threshold` of V̄ at the reference a0."""
+    def visited_value(self) -> float | None:
+        """The mean V̄ over the live elites: the worth of the visited region's skills."""
         live = self.elites.live()
         if self.layers is None or not len(live):
+            return None
+        return float(marginal_function(self.layers, self.space)(self.elites.params[live]).mean())
+
+    def mastered(self) -> bool:
+        """The mastering curriculum's test ([L21] §7.3: "a threshold of mean marginal values"):
+        the visited skills' mean V̄ has stopped rising: over the last `mastery_window` policy
+        updates of this refinement phase it rose by less than `mastery_threshold` of itself."""
+        window, progress = self.sc.mastery_window, self.phase.progress
+        if len(progress) <= window:
             return False
-        v_bar = marginal_function(self.layers, self.space)
-        ref = float(v_bar(self.reference[None])[0])
-        return ref > 0 and float(v_bar(self.elites.params[live]).mean()) >= (
-            self.sc.mastery_threshold * ref
-        )
+        then = progress[-1 - window]
+        return progress[-1] - then < self.sc.mastery_threshold * abs(then)
 
     def update_marginal(self, layers: Layers, mu: float, iteration: int, refill: bool) -> None:
         super().update_marginal(layers, mu, iteration, refill)
-        self._tick()
+        self._tick(update=True)
 
     ENTRY_PARTS = ("traces",)  # one entry per elite: written as the elite set changes
 
