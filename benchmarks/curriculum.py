@@ -150,10 +150,15 @@ def plot(runs: list[dict], path: Path, config: str) -> None:
     fig, ax = plt.subplots(figsize=(6, 4))
     colors = {"curriculum": "tab:red", "uniform": "tab:blue", "exploration_only": "tab:green",
               "mastering": "tab:purple", "alternating": "tab:orange"}  # fmt: skip
-    for r in runs:
+    for r in runs:  # each seed thin, the mean over the seeds at common N thick
         n = [p["episodes"] for p in r["curve"]]
         er = [p["explored_ratio"] for p in r["curve"]]
-        ax.plot(n, er, color=colors[r["sampling"]], label=f"{r['sampling']} (seed {r['seed']})")
+        ax.plot(n, er, color=colors[r["sampling"]], alpha=0.3, linewidth=0.8)
+    mean = compare(runs)
+    for sampling, er in mean["explored_ratio"].items():
+        seeds = sum(r["sampling"] == sampling for r in runs)
+        ax.plot(mean["episodes"], er, color=colors[sampling], linewidth=2,
+                label=f"{sampling} (mean of {seeds})")  # fmt: skip
     ax.set_xlabel("episodes N")
     ax.set_ylabel("explored ratio ER")
     ax.set_title(f"{Path(config).stem}: the curricula of [L21] §7.3 (Fig. 8)")
