@@ -132,6 +132,13 @@ def compare(runs: list[dict]) -> dict:
         per_mode.setdefault(r["sampling"], []).append(np.interp(grid, n, er))
     mean = {k: np.mean(v, axis=0) for k, v in per_mode.items()}
     out = {"episodes": grid.tolist(), "explored_ratio": {k: v.tolist() for k, v in mean.items()}}
+    # the share of the policy updates after π0's base stage spent refining, per mode
+    refining: dict[str, list[float]] = {}
+    for r in runs:
+        after = [p["phase"] for p in r["curve"] if p["stage"] != "base"]
+        share = sum(p == "refinement" for p in after) / len(after) if after else 0.0
+        refining.setdefault(r["sampling"], []).append(share)
+    out["refinement_share"] = {k: float(np.mean(v)) for k, v in refining.items()}
     if {"curriculum", "uniform"} <= set(mean):
         c, u = mean["curriculum"], mean["uniform"]
         out["final_ratio"] = float(c[-1] / u[-1]) if u[-1] > 0 else None
