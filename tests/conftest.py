@@ -1,9 +1,13 @@
+import importlib.util
 import os
 import warnings
+from pathlib import Path
 
 import pytest
 
 import paramimic.envs  # noqa: F401  (registers the gymnasium ids)
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(autouse=True)
@@ -97,6 +101,22 @@ def holds(predicate, seconds: float, what: str = "a condition", every: float = 0
         if time.monotonic() > deadline:
             return
         time.sleep(every)
+
+
+@pytest.fixture
+def benchmark_module():
+    """`benchmark_module(name)`: benchmarks/<name>.py imported as a module (the benchmarks are
+    scripts, not a package), so a test runs a study's own code."""
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(
+            f"{name}_bench", ROOT / "benchmarks" / f"{name}.py"
+        )
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 @pytest.fixture(name="wait_until")
@@ -223,7 +243,6 @@ def screenshots(tmp_path_factory):
     """Where the browser tests save their screenshots: $PARAMIMIC_SCREENSHOTS (the docs'
     come from `PARAMIMIC_SCREENSHOTS=benchmarks/results/screenshots pytest tests/test_dashboard.py
     tests/test_play.py`), else a temp dir, so that `make test` leaves the checkout clean."""
-    from pathlib import Path
 
     where = os.environ.get("PARAMIMIC_SCREENSHOTS")
     path = Path(where) if where else tmp_path_factory.mktemp("screenshots")
@@ -238,7 +257,6 @@ def compose_learner_health(run_dir, max_age: float):
     import re
     import subprocess
     import sys
-    from pathlib import Path
 
     import yaml
 

@@ -1,26 +1,14 @@
 """benchmarks/curriculum.py ([L21] Fig. 8): a short run of two §7.3 curricula (those with a phase
 clock) through its own code: a change of the library's types breaks a test, not a study."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _benchmark():
-    spec = importlib.util.spec_from_file_location(
-        "curriculum_bench", ROOT / "benchmarks" / "curriculum.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.mark.parametrize("sampling", ["mastering", "alternating"])
-def test_a_short_run_records_er_against_episodes_and_its_elites(tmp_path, sampling):
-    bench = _benchmark()
+def test_a_short_run_records_er_against_episodes_and_its_elites(
+    benchmark_module, tmp_path, sampling
+):
+    bench = benchmark_module("curriculum")
     out = bench.run("configs/walker_jump.yaml", sampling, 8192, 0, tmp_path / sampling)
     assert out["sampling"] == sampling and out["steps"] == 8192
     curve = out["curve"]

@@ -2,27 +2,14 @@
 paper's settings and one of an [L21] row, each evaluated as the row measures it, and the table
 written from their JSON, through the benchmark's own code (budgets and evaluation shrunk)."""
 
-import importlib.util
 import json
 import shutil
-from pathlib import Path
 
 from paramimic.training import checkpoint
 
-ROOT = Path(__file__).resolve().parent.parent
 
-
-def _benchmark():
-    spec = importlib.util.spec_from_file_location(
-        "reproduce_bench", ROOT / "benchmarks" / "reproduce.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_a_row_at_the_papers_settings_is_kept_and_tabled(tmp_path, monkeypatch):
-    bench = _benchmark()
+def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_path, monkeypatch):
+    bench = benchmark_module("reproduce")
     monkeypatch.setattr(bench, "OUT", tmp_path / "results")
     monkeypatch.setattr(bench, "RUNS", tmp_path / "runs")
     monkeypatch.setattr(bench, "EVAL", {"bodies": 3, "seconds": 1.0, "grid": 2})
