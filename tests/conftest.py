@@ -214,6 +214,7 @@ RAY_MODULES = frozenset(
 )  # fmt: skip
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's own, which reads the groups off the marks
 def pytest_collection_modifyitems(items):
     for item in items:
         fixtures = set(getattr(item, "fixturenames", ()))
@@ -222,6 +223,24 @@ def pytest_collection_modifyitems(items):
         module = item.module.__name__.rpartition(".")[2] if item.module else ""
         if fixtures & RAY_FIXTURES or module in RAY_MODULES:
             item.add_marker(pytest.mark.xdist_group("ray"))
+
+
+@pytest.fixture(autouse=True)
+def _grouped_as_marked(request):
+    """A test of an xdist_group that `--dist loadgroup` did not group could run beside another
+    Ray cluster or over a folder another test is changing, and nothing would say so (pytest 9.2
+    with xdist 3.8, pytest-xdist#1386): it fails, saying why."""
+    node = request.node
+    if (
+        request.config.getoption("loadgroup", default=False)
+        and node.get_closest_marker("xdist_group")
+        and "@" not in node.nodeid
+    ):
+        pytest.fail(
+            "--dist loadgroup did not group this xdist_group test: a pytest / pytest-xdist pair "
+            "that drops the mark (see the pin in pyproject.toml)",
+            pytrace=False,
+        )
 
 
 @pytest.fixture(scope="session")

@@ -22,6 +22,12 @@ WALK = {
     "train": {"total_steps": 256, "checkpoint_every": 1},
 }
 
+# One test writes a controller into the installed package's folder, as `paramimic controllers
+# add` does for a user, and another loads every file there: on two xdist workers the second
+# would meet the first's file half-way (added, or removed between the listing and the load).
+# The module's tests run on one worker, in turn.
+pytestmark = pytest.mark.xdist_group("shipped_controllers")
+
 
 def test_a_run_ships_as_a_controller_that_eval_takes_by_name(tmp_path):
     _, run = _train_serial(tmp_path, WALK)
