@@ -19,6 +19,7 @@ benchmarks/results/reproduce/.
 
     python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--jobs 2]
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
+    python benchmarks/reproduce.py cost         # what a run costs in each arm (cost.json)
     python benchmarks/reproduce.py list
 """
 
@@ -124,6 +125,65 @@ def result_path(row: str, arm: str, variant: str, seed: int, steps: int) -> Path
     return OUT / f"{row}_{arm}_{variant}_s{seed}_{steps // 1000}k.json"
 
 
+def _config(row: str, arm: str, variant: str, seed: int, run_dir: Path, threads: int | None):
+    """A variant's config in an arm, and the overrides that made it from the row's config."""
+    from paramimic.config import load_config
+
+    spec = ROWS[row]
+    config, overrides = spec["variants"][variant]
+    overrides = (paper_settings(spec["recipe"]) if arm == "paper" else {}) | overrides
+    cfg = load_config(
+        ROOT / config,
+        overrides
+        | {"train.seed": seed, "train.run_dir": str(run_dir)}
+        | ({"train.torch_threads": threads} if threads else {}),
+    )
+    return cfg, overrides
+
+
+def cost(rows: list[str], iterations: int = 3) -> dict:
+    """What a run of each row costs in each arm on this machine: a few policy iterations of the
+    row's first variant, arm after arm in one process (compare the arms of one call only:
+    speeds drift between days), as wall-clock seconds per 1,000 env steps and the hours a run
+    of the row's budget would take at that rate, every core to the one run."""
+    import tempfile
+
+    import torch
+
+    from paramimic.training.trainer import train_serial
+
+    out = {}
+    for row in rows:
+        spec = ROWS[row]
+        variant = next(iter(spec["variants"]))
+        out[row] = {"variant": variant, "budget": spec["steps"]}
+        for arm in ("paper", "ours"):
+            with tempfile.TemporaryDirectory() as tmp:
+                cfg, _ = _config(row, arm, variant, 0, Path(tmp), None)
+                steps = iterations * cfg.ppo.num_steps
+                torch.manual_seed(0)
+                t0 = time.perf_counter()
+                trainer = train_serial(cfg, steps, Path(tmp))
+                seconds = time.perf_counter() - t0
+            per_k = 1000 * seconds / trainer.progress.env_steps
+            out[row][arm] = {
+                "env_steps": trainer.progress.env_steps,
+                "seconds": seconds,
+                "seconds_per_1k_steps": per_k,
+                "hours_per_run": per_k * spec["steps"] / 1000 / 3600,
+                "physics_hz": cfg.env.physics_hz,
+                "minibatch_size": cfg.ppo.minibatch_size,
+                "hidden_sizes": list(cfg.ppo.hidden_sizes),
+            }
+            print(f"{row} {arm}: {per_k:.2f} s per 1k env steps, "
+                  f"{out[row][arm]['hours_per_run']:.1f} h per run")  # fmt: skip
+    OUT.mkdir(parents=True, exist_ok=True)
+    path = OUT / "cost.json"
+    kept = json.loads(path.read_text()) if path.exists() else {}
+    path.write_text(json.dumps(kept | out, indent=1))
+    return out
+
+
 def run_one(
     row: str, arm: str, variant: str, seed: int, steps: int, threads: int | None = None
 ) -> dict:
@@ -132,28 +192,19 @@ def run_one(
     (one per run when runs share the machine; default: the config's)."""
     import torch
 
-    from paramimic.config import load_config
     from paramimic.evaluation import evaluate_config
     from paramimic.training.trainer import train_serial
 
     spec = ROWS[row]
-    config, overrides = spec["variants"][variant]
-    arm_overrides = paper_settings(spec["recipe"]) if arm == "paper" else {}
     run_dir = RUNS / row / arm / f"{variant}_s{seed}"
-    cfg = load_config(
-        ROOT / config,
-        arm_overrides
-        | overrides
-        | {"train.seed": seed, "train.run_dir": str(run_dir)}
-        | ({"train.torch_threads": threads} if threads else {}),
-    )
+    cfg, overrides = _config(row, arm, variant, seed, run_dir, threads)
     torch.manual_seed(seed)
     t0 = time.perf_counter()
     trainer = train_serial(cfg, steps, run_dir)
     seconds = time.perf_counter() - t0
-    out = {"row": row, "arm": arm, "variant": variant, "seed": seed, "config": config,
-           "overrides": arm_overrides | overrides, "env_steps": trainer.progress.env_steps,
-           "train_seconds": seconds}  # fmt: skip
+    out = {"row": row, "arm": arm, "variant": variant, "seed": seed,
+           "config": spec["variants"][variant][0], "overrides": overrides,
+           "env_steps": trainer.progress.env_steps, "train_seconds": seconds}  # fmt: skip
     if spec["measure"] == "family":
         report = evaluate_config(trainer.learner.policy, cfg, EVAL["bodies"], EVAL_SEED + seed,
                                  EVAL["grid"], EVAL["seconds"])  # fmt: skip
@@ -318,16 +369,26 @@ def claims() -> list[list[str]]:
     return rows
 
 
+def _budget(row: str, costs: dict) -> str:
+    """A row's budget, with what a run of it costs in each arm where `cost` has timed it."""
+    budget = f"{ROWS[row]['steps'] / 1e6:.0f}M per run"
+    if row not in costs:
+        return budget
+    hours = " / ".join(f"{costs[row][arm]['hours_per_run']:.1f}" for arm in ("paper", "ours"))
+    return f"{budget}: {hours} h (paper's / ours)"
+
+
 def table() -> str:
     rows = []
+    cost_file = OUT / "cost.json"
+    costs = json.loads(cost_file.read_text()) if cost_file.exists() else {}
     for row, spec in ROWS.items():
         for variant in spec["variants"]:
             cells = {}
             for arm in ("paper", "ours"):
                 cells[arm] = _cell(row, _results(row, arm, variant))
-            budget = f"{spec['steps'] / 1e6:.0f}M per run"
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
-                         cells["paper"], cells["ours"], budget])  # fmt: skip
+                         cells["paper"], cells["ours"], _budget(row, costs)])  # fmt: skip
     kept = RESULTS / "curriculum" / "runs"
     for sampling in CURRICULA:
         runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
@@ -379,6 +440,9 @@ def main() -> None:
         default=1,
         help="runs at once, one process and one torch thread each (2 on a 2-core machine)",
     )
+    c = sub.add_parser("cost", help="time a few iterations of each row in each arm")
+    c.add_argument("--rows", default=",".join(ROWS), help="comma-separated; default: every row")
+    c.add_argument("--iterations", type=int, default=3)
     sub.add_parser("table")
     sub.add_parser("list")
     args = ap.parse_args()
@@ -386,6 +450,9 @@ def main() -> None:
         for row, spec in ROWS.items():
             print(f"{row:12s} {spec['paper']:16s} {spec['what']}; variants "
                   f"{', '.join(spec['variants'])}; {spec['steps']:,} steps per run")  # fmt: skip
+        return
+    if args.cmd == "cost":
+        cost(args.rows.split(","), args.iterations)
         return
     if args.cmd == "table":
         print(table())

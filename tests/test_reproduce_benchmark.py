@@ -52,3 +52,31 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
         summary["header"][3] == "paper's settings"
         and len(summary["rows"]) == len(body.splitlines()) - 2
     )
+
+
+def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
+    benchmark_module, tmp_path, monkeypatch
+):
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "results")
+    docs = tmp_path / "reproduce.md"
+    shutil.copy(bench.DOCS, docs)
+    monkeypatch.setattr(bench, "DOCS", docs)
+
+    out = bench.cost(["wl19_fig6"], iterations=1)["wl19_fig6"]
+    paper, ours = out["paper"], out["ours"]
+    # the paper arm ran [WL19] Table 2's settings, ours walker_legs.yaml's
+    assert (paper["physics_hz"], paper["minibatch_size"]) == (600, 128)
+    assert (ours["physics_hz"], ours["minibatch_size"]) == (300, 512)
+    for arm in (paper, ours):
+        assert arm["env_steps"] >= 4096 and arm["seconds"] > 0
+        assert arm["hours_per_run"] == arm["seconds_per_1k_steps"] * 2_000_000 / 1000 / 3600
+    assert json.loads((tmp_path / "results" / "cost.json").read_text())["wl19_fig6"] == out
+
+    line = next(x for x in bench.table().splitlines() if "| k10 " in x)
+    budget = line.strip("|").split("|")[-1].strip()
+    assert budget == (
+        f"2M per run: {paper['hours_per_run']:.1f} / {ours['hours_per_run']:.1f} h (paper's / ours)"
+    )
+    table4 = next(x for x in bench.table().splitlines() if "biped_lower_rn" in x)
+    assert table4.strip("|").split("|")[-1].strip() == "2M per run"  # not timed: no estimate
