@@ -250,6 +250,26 @@ def _cell(row: str, results: list[dict]) -> str:
     return f"gravity {shown}, ER {np.mean(er):.2f} (seeds {seeds})"
 
 
+def _summary(row: str, results: list[dict]) -> dict:
+    """A variant's measure per seed and its mean over the seeds (reproduce.json; the docs' text
+    reads its numbers from here)."""
+    reps = [r["report"] for r in results]
+    if ROWS[row]["measure"] == "family":
+        per_seed = {
+            "task": [x["task_achievement"] for x in reps],
+            "falls": [x["fall_percent"] for x in reps],
+            "worst_decile": [x["worst_decile_return"] for x in reps],
+            "cv": [x["grid_uniformity"]["coefficient_of_variation"] for x in reps],
+        }
+    else:
+        per_seed = {
+            "lowest_gravity": [(x["ranges"].get("gravity") or [None])[0] for x in reps],
+            "explored_ratio": [x["explored_ratio"] for x in reps],
+        }
+    means = {k: float(np.mean(v)) if v and None not in v else None for k, v in per_seed.items()}
+    return {"seeds": [r["seed"] for r in results], "per_seed": per_seed, "mean": means}
+
+
 def departures() -> str:
     """Every field a paper's recipe sets, beside ours (the library default or our recipes')."""
     from paramimic.config import ExperimentConfig
@@ -382,11 +402,15 @@ def table() -> str:
     rows = []
     cost_file = OUT / "cost.json"
     costs = json.loads(cost_file.read_text()) if cost_file.exists() else {}
+    summary = {}
     for row, spec in ROWS.items():
         for variant in spec["variants"]:
             cells = {}
             for arm in ("paper", "ours"):
-                cells[arm] = _cell(row, _results(row, arm, variant))
+                found = _results(row, arm, variant)
+                cells[arm] = _cell(row, found)
+                if found:
+                    summary.setdefault(row, {}).setdefault(arm, {})[variant] = _summary(row, found)
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], _budget(row, costs)])  # fmt: skip
     kept = RESULTS / "curriculum" / "runs"
@@ -420,8 +444,9 @@ def table() -> str:
         text = f"{head}{marks[0]}\n{part}\n{marks[1]}{tail}"
     DOCS.write_text(text)
     OUT.mkdir(parents=True, exist_ok=True)
-    summary = {"rows": rows, "header": header, "claims": checked, "claims_header": claims_header}
-    (OUT / "reproduce.json").write_text(json.dumps(summary, indent=1))
+    out = {"rows": rows, "header": header, "claims": checked, "claims_header": claims_header,
+           "variants": summary}  # fmt: skip
+    (OUT / "reproduce.json").write_text(json.dumps(out, indent=1))
     return body
 
 

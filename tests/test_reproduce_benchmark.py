@@ -52,6 +52,13 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
         summary["header"][3] == "paper's settings"
         and len(summary["rows"]) == len(body.splitlines()) - 2
     )
+    kept_falls = summary["variants"]["wl19_table4"]["paper"]["quadruped_no_rn"]
+    assert kept_falls["seeds"] == [0]
+    assert kept_falls["mean"]["falls"] == report["fall_percent"]
+    assert summary["variants"]["l21_table2"]["ours"]["A1"]["per_seed"]["explored_ratio"] == [
+        a1["report"]["explored_ratio"]
+    ]
+    assert "ours" not in summary["variants"]["wl19_table4"]  # no run of ours: no summary
 
 
 def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
