@@ -184,6 +184,32 @@ def cost(rows: list[str], iterations: int = 3) -> dict:
     return out
 
 
+def add_sampling() -> list[Path]:
+    """Kept runs of a [WL19] row written without the sampler's concentration at their end get
+    it from their run directory's checkpoint (the state they were evaluated in)."""
+    from paramimic.config import ExperimentConfig
+    from paramimic.curriculum.adaptive import AdaptiveCurriculum
+    from paramimic.training import checkpoint
+
+    done = []
+    for path in sorted(OUT.glob("wl19_*_s*_*k.json")):
+        out = json.loads(path.read_text())
+        run_dir = RUNS / out["row"] / out["arm"] / f"{out['variant']}_s{out['seed']}"
+        if "sampling" in out["report"] or not checkpoint.checkpoint_dir(run_dir).is_dir():
+            continue
+        state = checkpoint.load(run_dir)
+        if state["progress"]["env_steps"] != out["env_steps"]:
+            continue  # trained on since: not the state that was evaluated
+        cfg = ExperimentConfig.model_validate(state["config"])
+        curriculum = AdaptiveCurriculum.from_config(cfg)
+        curriculum.from_state(state["curriculum"])
+        out["report"]["sampling"] = curriculum.concentration()
+        path.write_text(json.dumps(out, indent=2))
+        done.append(path)
+        print(f"sampling of {path.name}: {out['report']['sampling']}")
+    return done
+
+
 def run_one(
     row: str, arm: str, variant: str, seed: int, steps: int, threads: int | None = None
 ) -> dict:
@@ -209,7 +235,8 @@ def run_one(
         report = evaluate_config(trainer.learner.policy, cfg, EVAL["bodies"], EVAL_SEED + seed,
                                  EVAL["grid"], EVAL["seconds"])  # fmt: skip
         grid = report.pop("grid")
-        out["report"] = report | {"grid_uniformity": grid["uniformity"]}
+        out["report"] = report | {"grid_uniformity": grid["uniformity"],
+                                  "sampling": trainer.curriculum.concentration()}  # fmt: skip
     else:
         c = trainer.curriculum
         live = c.elites.live()
@@ -260,6 +287,9 @@ def _summary(row: str, results: list[dict]) -> dict:
             "falls": [x["fall_percent"] for x in reps],
             "worst_decile": [x["worst_decile_return"] for x in reps],
             "cv": [x["grid_uniformity"]["coefficient_of_variation"] for x in reps],
+            # how narrowly the sampler drew at the end (`mcmc.concentration`)
+            "effective_share": [(x.get("sampling") or {}).get("effective_share") for x in reps],
+            "low_mass": [(x.get("sampling") or {}).get("low_mass") for x in reps],
         }
     else:
         per_seed = {
@@ -469,6 +499,7 @@ def main() -> None:
     c.add_argument("--rows", default=",".join(ROWS), help="comma-separated; default: every row")
     c.add_argument("--iterations", type=int, default=3)
     sub.add_parser("table")
+    sub.add_parser("sampling", help="the sampler's concentration into kept runs that lack it")
     sub.add_parser("list")
     args = ap.parse_args()
     if args.cmd == "list":
@@ -478,6 +509,9 @@ def main() -> None:
         return
     if args.cmd == "cost":
         cost(args.rows.split(","), args.iterations)
+        return
+    if args.cmd == "sampling":
+        add_sampling()
         return
     if args.cmd == "table":
         print(table())

@@ -2,7 +2,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from paramimic.curriculum.mcmc import AdaptiveSampler, metropolis_hastings, surrogate_log_density
+from paramimic.curriculum.mcmc import (
+    AdaptiveSampler,
+    concentration,
+    metropolis_hastings,
+    surrogate_log_density,
+)
 from paramimic.task_space import TaskSpace
 
 SPACE = TaskSpace.from_ranges({"leg": (0.5, 1.5), "v": (1.0, 1.0)})
@@ -67,3 +72,18 @@ def test_nonpositive_mu_falls_back_to_uniform():
     sampler = AdaptiveSampler(SPACE, k=10.0, n_mcmc=100, seed=0)
     sampler.refill(v_bar, mu=-1.0)
     assert not sampler.adaptive
+
+
+def test_concentration_by_hand():
+    """Half the box at V̄ = 0.5 μ, half at 1.5 μ: weights e^{k/2} and e^{-k/2}, so the effective
+    share is (a + b)² / (2 (a² + b²)) and the lowest half holds a / (a + b) of the mass."""
+    mu = 4.0
+    v = np.array([0.5 * mu] * 500 + [1.5 * mu] * 500)
+    for k in (0.0, 2.0, 10.0):
+        a, b = np.exp(k / 2), np.exp(-k / 2)
+        got = concentration(v, mu, k, low=0.5)
+        assert got["effective_share"] == pytest.approx((a + b) ** 2 / (2 * (a * a + b * b)))
+        assert got["low_mass"] == pytest.approx(a / (a + b))
+    assert concentration(v, mu, 0.0)["effective_share"] == pytest.approx(1.0)
+    assert concentration(v, mu, 0.0, low=0.5)["low_mass"] == pytest.approx(0.5)
+    assert concentration(v, mu, 40.0)["effective_share"] < 0.51  # all on the low half

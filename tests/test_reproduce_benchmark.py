@@ -18,10 +18,11 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     monkeypatch.setattr(bench, "DOCS", docs)
 
     # [WL19] Table 4, RN off, at [WL19]'s settings: the variant's switch beside the recipe's
-    out = bench.run_one("wl19_table4", "paper", "quadruped_no_rn", 0, 4096, threads=1)
+    # two iterations: the sampler draws by V̄ from the second on
+    out = bench.run_one("wl19_table4", "paper", "quadruped_no_rn", 0, 8192, threads=1)
     assert out["overrides"]["recipe"] == "wl19"
     assert out["overrides"]["env.reward.normalize"] is False
-    assert out["env_steps"] >= 4096
+    assert out["env_steps"] >= 8192
     report = out["report"]
     assert 0.0 <= report["fall_percent"] <= 100.0
     assert "coefficient_of_variation" in report["grid_uniformity"]
@@ -30,8 +31,18 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     assert used["env"]["physics_hz"] == 600  # [WL19] Table 2, where quadruped.yaml says 300
     assert used["env"]["reward"]["normalize"] is False
     assert used["ppo"]["minibatch_size"] == 128
-    kept = bench.result_path("wl19_table4", "paper", "quadruped_no_rn", 0, 4096)
+    kept = bench.result_path("wl19_table4", "paper", "quadruped_no_rn", 0, 8192)
     assert json.loads(kept.read_text())["report"] == report
+    # how narrowly [WL19] Eq. 10 drew at the run's end (uniform while μ ≤ 0, as this early)
+    sampling = report["sampling"]
+    assert 0.0 < sampling["effective_share"] <= 1.0 and 0.0 <= sampling["low_mass"] <= 1.0
+    # a run kept without it gets it back from its run directory's checkpoint
+    bare = json.loads(kept.read_text())
+    del bare["report"]["sampling"]
+    kept.write_text(json.dumps(bare))
+    assert bench.add_sampling() == [kept]
+    assert json.loads(kept.read_text())["report"]["sampling"] == sampling
+    assert bench.add_sampling() == []  # nothing left to add
 
     # [L21] Table 2's A1 in our arm: the explored range of the elites
     a1 = bench.run_one("l21_table2", "ours", "A1", 0, 4096, threads=1)

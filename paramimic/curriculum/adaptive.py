@@ -10,7 +10,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from paramimic.config import CurriculumConfig, ExperimentConfig
-from paramimic.curriculum.mcmc import AdaptiveSampler
+from paramimic.curriculum.mcmc import AdaptiveSampler, concentration
 from paramimic.messages import CurriculumSummary, EpisodeReport, TaskDeal
 from paramimic.rl.numpy_mlp import Layers, float32_layers, numpy_forward
 from paramimic.task_space import TaskSpace
@@ -165,6 +165,15 @@ class AdaptiveCurriculum:
         if self.width < 1.0:
             self._promote(episodes, falls)
         return self.width
+
+    def concentration(self, n: int = 20_000, seed: int = 0) -> dict[str, float] | None:
+        """How narrowly the sampler draws now (`mcmc.concentration` over n uniform points of
+        the box, through the current range); None before V̄ exists."""
+        if self.layers is None or self.mu is None:
+            return None
+        tasks = self.space.sample(np.random.default_rng(seed), n)
+        v_bar = marginal_function(self.layers, self.space)(self.pull(tasks))
+        return concentration(v_bar, self.mu, self.sampler.k)
 
     def set_k(self, k: float) -> None:
         if not k >= 0:

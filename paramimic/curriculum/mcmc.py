@@ -21,6 +21,20 @@ def surrogate_log_density(v_bar: np.ndarray, mu: float, k: float) -> np.ndarray:
     return -k * (np.asarray(v_bar) - mu) / mu
 
 
+def concentration(v_bar: np.ndarray, mu: float, k: float, low: float = 0.1) -> dict[str, float]:
+    """How narrowly P̄ ([WL19] Eq. 10) draws, from V̄ at points spread uniformly over the box:
+    its effective sample share (Σw)² / (n Σw²) (1 for uniform draws, 1/n for a single point) and
+    the share of its mass on the `low` fraction of points with the lowest V̄ (`low` if uniform)."""
+    v_bar = np.asarray(v_bar, dtype=np.float64)
+    log_w = surrogate_log_density(v_bar, mu, k) if k and mu and mu > 0 else np.zeros_like(v_bar)
+    w = np.exp(log_w - log_w.max())
+    lowest = v_bar <= np.quantile(v_bar, low)
+    return {
+        "effective_share": float(w.sum() ** 2 / (len(w) * (w**2).sum())),
+        "low_mass": float(w[lowest].sum() / w.sum()),
+    }
+
+
 def metropolis_hastings(
     log_density: Callable[[np.ndarray], np.ndarray],
     space: TaskSpace,
