@@ -98,3 +98,26 @@ def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
     )
     table4 = next(x for x in bench.table().splitlines() if "biped_lower_rn" in x)
     assert table4.strip("|").split("|")[-1].strip() == "2M per run"  # not timed: no estimate
+
+
+def test_fig6_falls_are_ranked_against_how_widely_each_run_sampled(
+    benchmark_module, tmp_path, monkeypatch
+):
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "OUT", tmp_path)
+    kept = [("k5", 0, 2.0, 0.8), ("k10", 0, 5.0, 0.3), ("k20", 0, 9.0, 0.05), ("k0", 0, 30.0, 1.0)]
+    for variant, seed, falls, share in kept[:2]:
+        report = {"fall_percent": falls, "sampling": {"effective_share": share, "low_mass": 0.5}}
+        bench.result_path("wl19_fig6", "ours", variant, seed, 1000).write_text(
+            json.dumps({"seed": seed, "report": report})
+        )
+    assert bench.falls_against_sampling("ours") is None  # two runs: no rank correlation yet
+    for variant, seed, falls, share in kept[2:]:
+        report = {"fall_percent": falls, "sampling": {"effective_share": share, "low_mass": 0.5}}
+        bench.result_path("wl19_fig6", "ours", variant, seed, 1000).write_text(
+            json.dumps({"seed": seed, "report": report})
+        )
+    # k = 0 draws uniformly by definition: left out, so the three adaptive runs rank exactly
+    got = bench.falls_against_sampling("ours")
+    assert got["runs"] == 3 and got["spearman"] == -1.0
+    assert bench.falls_against_sampling("paper") is None
