@@ -95,16 +95,16 @@ ROWS: dict[str, dict] = {
         "steps": 2_000_000,
         "measure": "skill",
         "paper_numbers": {
-            "A1": "gravity [0.4, 1.65]",
-            "A2": "gravity [0.3, 1.65]",
-            "A3": "gravity [0.2, 1.65]",
+            "A1": "none for a planar jump (humanoid: gravity [0.4, 1.65])",
+            "A2": "none for a planar jump (humanoid: gravity [0.3, 1.65])",
+            "A3": "none for a planar jump (humanoid: gravity [0.2, 1.65])",
         },
     },
 }
 CURRICULA = ("uniform", "exploration_only", "mastering", "alternating", "curriculum")
 CURRICULA_PAPER = {
-    "uniform": "Jump: 43 % explored on average",
-    "exploration_only": "Jump: 87 %, Push: 80 %",
+    "uniform": "none for a planar jump (humanoid Jump: 43 % explored)",
+    "exploration_only": "none for a planar jump (humanoid Jump: 87 %)",
     "mastering": "explores the hard examples",
     "alternating": "explores the hard examples",
     "curriculum": "the best balance in every example",
