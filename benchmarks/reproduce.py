@@ -20,6 +20,7 @@ benchmarks/results/reproduce/.
     python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--jobs 2]
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
     python benchmarks/reproduce.py cost         # what a run costs in each arm (cost.json)
+    python benchmarks/reproduce.py sampling     # the sampler's width into older [WL19] runs' JSON
     python benchmarks/reproduce.py list
 """
 
