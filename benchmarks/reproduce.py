@@ -57,6 +57,21 @@ ROWS: dict[str, dict] = {
             "quadruped_rn": ("configs/quadruped.yaml", {"env.reward.normalize": True}),
             "quadruped_no_rn": ("configs/quadruped.yaml", {"env.reward.normalize": False}),
         },
+        # ours: the recipes that learn these families here (docs/results/families-that-learn.md):
+        # every range shrunk halfway to the base body (x0.5), warm started from a base-body run
+        # of the same seed, which RN on and off share (on the base body every RN scale is 1)
+        "ours_variants": {
+            "biped_lower_rn": ("configs/biped_x0.5.yaml", {"env.reward.normalize": True}),
+            "biped_lower_no_rn": ("configs/biped_x0.5.yaml", {"env.reward.normalize": False}),
+            "quadruped_rn": ("configs/quadruped_x0.5.yaml", {"env.reward.normalize": True}),
+            "quadruped_no_rn": ("configs/quadruped_x0.5.yaml", {"env.reward.normalize": False}),
+        },
+        "base": {
+            "configs/biped_x0.5.yaml": ("configs/biped_base.yaml", 2_000_000),
+            "configs/quadruped_x0.5.yaml": ("configs/quadruped_base.yaml", 2_000_000),
+        },
+        # the biped's family stage needs longer (4M: 56 % falls in the study, 2M: 90 %)
+        "ours_steps": {"configs/biped_x0.5.yaml": 4_000_000},
         "recipe": "wl19",
         "steps": 2_000_000,
         "measure": "family",
@@ -126,13 +141,35 @@ def result_path(row: str, arm: str, variant: str, seed: int, steps: int) -> Path
     return OUT / f"{row}_{arm}_{variant}_s{seed}_{steps // 1000}k.json"
 
 
-def _config(row: str, arm: str, variant: str, seed: int, run_dir: Path, threads: int | None):
-    """A variant's config in an arm, and the overrides that made it from the row's config."""
+def variant_spec(row: str, arm: str, variant: str) -> tuple[str, dict, int, tuple | None]:
+    """A variant in an arm: its config, its overrides, its budget in env steps and its base
+    stage (a base-body config and its steps, or None): a row's `ours_variants` replace its
+    variants in our arm."""
+    spec = ROWS[row]
+    ours = spec.get("ours_variants") if arm == "ours" else None
+    config, overrides = (ours or spec["variants"])[variant]
+    base = spec.get("base", {}).get(config) if arm == "ours" else None
+    steps = spec.get("ours_steps", {}).get(config, spec["steps"]) if arm == "ours" else None
+    return config, overrides, steps or spec["steps"], base
+
+
+def base_dir(row: str, arm: str, base_config: str, seed: int) -> Path:
+    return RUNS / row / arm / f"base_{Path(base_config).stem}_s{seed}"
+
+
+def _config(
+    row: str, arm: str, variant: str, seed: int, run_dir: Path, threads: int | None,
+    warm: bool = True,
+):  # fmt: skip
+    """A variant's config in an arm, and the overrides that made it from the row's config
+    (`warm`: started from its base stage's run, where it has one)."""
     from paramimic.config import load_config
 
     spec = ROWS[row]
-    config, overrides = spec["variants"][variant]
+    config, overrides, _, base = variant_spec(row, arm, variant)
     overrides = (paper_settings(spec["recipe"]) if arm == "paper" else {}) | overrides
+    if base and warm:
+        overrides = overrides | {"train.init_from": str(base_dir(row, arm, base[0], seed))}
     cfg = load_config(
         ROOT / config,
         overrides
@@ -140,6 +177,37 @@ def _config(row: str, arm: str, variant: str, seed: int, run_dir: Path, threads:
         | ({"train.torch_threads": threads} if threads else {}),
     )
     return cfg, overrides
+
+
+def run_base(row: str, arm: str, base_config: str, steps: int, seed: int,
+             threads: int | None = None) -> Path:  # fmt: skip
+    """A base-body stage trained to `steps` (resumed; nothing to do once there). Two runs that
+    start from one base stage at once: the second waits for the first's (a lock file)."""
+    import fcntl
+
+    import torch
+
+    from paramimic.config import load_config
+    from paramimic.training import checkpoint
+    from paramimic.training.trainer import train_serial
+
+    run_dir = base_dir(row, arm, base_config, seed)
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    with open(run_dir.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        done = checkpoint.checkpoint_dir(run_dir).is_dir() and (
+            checkpoint.load(run_dir)["progress"]["env_steps"] >= steps
+        )
+        if not done:
+            cfg = load_config(
+                ROOT / base_config,
+                {"train.seed": seed, "train.run_dir": str(run_dir)}
+                | ({"train.torch_threads": threads} if threads else {}),
+            )
+            torch.manual_seed(seed)
+            train_serial(cfg, steps, run_dir)
+            print(f"base stage {run_dir} at {steps:,} env steps")
+    return run_dir
 
 
 def cost(rows: list[str], iterations: int = 3) -> dict:
@@ -157,10 +225,11 @@ def cost(rows: list[str], iterations: int = 3) -> dict:
     for row in rows:
         spec = ROWS[row]
         variant = next(iter(spec["variants"]))
-        out[row] = {"variant": variant, "budget": spec["steps"]}
+        out[row] = {"variant": variant}
         for arm in ("paper", "ours"):
+            budget = variant_spec(row, arm, variant)[2]
             with tempfile.TemporaryDirectory() as tmp:
-                cfg, _ = _config(row, arm, variant, 0, Path(tmp), None)
+                cfg, _ = _config(row, arm, variant, 0, Path(tmp), None, warm=False)
                 steps = iterations * cfg.ppo.num_steps
                 torch.manual_seed(0)
                 t0 = time.perf_counter()
@@ -171,7 +240,8 @@ def cost(rows: list[str], iterations: int = 3) -> dict:
                 "env_steps": trainer.progress.env_steps,
                 "seconds": seconds,
                 "seconds_per_1k_steps": per_k,
-                "hours_per_run": per_k * spec["steps"] / 1000 / 3600,
+                "budget": budget,
+                "hours_per_run": per_k * budget / 1000 / 3600,
                 "physics_hz": cfg.env.physics_hz,
                 "minibatch_size": cfg.ppo.minibatch_size,
                 "hidden_sizes": list(cfg.ppo.hidden_sizes),
@@ -224,13 +294,17 @@ def run_one(
 
     spec = ROWS[row]
     run_dir = RUNS / row / arm / f"{variant}_s{seed}"
+    config, _, _, base = variant_spec(row, arm, variant)
+    if base:
+        run_base(row, arm, *base, seed, threads)
     cfg, overrides = _config(row, arm, variant, seed, run_dir, threads)
     torch.manual_seed(seed)
     t0 = time.perf_counter()
     trainer = train_serial(cfg, steps, run_dir)
     seconds = time.perf_counter() - t0
     out = {"row": row, "arm": arm, "variant": variant, "seed": seed,
-           "config": spec["variants"][variant][0], "overrides": overrides,
+           "config": config, "overrides": overrides,
+           "base": {"config": base[0], "env_steps": base[1]} if base else None,
            "env_steps": trainer.progress.env_steps, "train_seconds": seconds}  # fmt: skip
     if spec["measure"] == "family":
         report = evaluate_config(trainer.learner.policy, cfg, EVAL["bodies"], EVAL_SEED + seed,
@@ -434,13 +508,20 @@ def claims() -> list[list[str]]:
     return rows
 
 
-def _budget(row: str, costs: dict) -> str:
-    """A row's budget, with what a run of it costs in each arm where `cost` has timed it."""
-    budget = f"{ROWS[row]['steps'] / 1e6:.0f}M per run"
+def _budget(row: str, variant: str, costs: dict) -> str:
+    """A variant's budget in each arm (ours with its base stage, which a seed's variants share),
+    with the hours a run takes at the rate `cost` timed for the row's arm, where it has."""
+    paper, ours = (variant_spec(row, arm, variant) for arm in ("paper", "ours"))
+    text = f"{paper[2] / 1e6:.0f}M per run"
+    if ours[2] != paper[2] or ours[3]:
+        base = f"{ours[3][1] / 1e6:.0f}M base + " if ours[3] else ""
+        text = f"paper's {paper[2] / 1e6:.0f}M, ours {base}{ours[2] / 1e6:.0f}M per run"
     if row not in costs:
-        return budget
-    hours = " / ".join(f"{costs[row][arm]['hours_per_run']:.1f}" for arm in ("paper", "ours"))
-    return f"{budget}: {hours} h (paper's / ours)"
+        return text
+    hours = [costs[row][arm]["seconds_per_1k_steps"] * spec[2] / 1000 / 3600
+             for arm, spec in (("paper", paper), ("ours", ours))]  # fmt: skip
+    arms = "paper's / ours" + (" without its base" if ours[3] else "")
+    return f"{text}: {hours[0]:.1f} / {hours[1]:.1f} h ({arms})"
 
 
 def table() -> str:
@@ -457,7 +538,7 @@ def table() -> str:
                 if found:
                     summary.setdefault(row, {}).setdefault(arm, {})[variant] = _summary(row, found)
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
-                         cells["paper"], cells["ours"], _budget(row, costs)])  # fmt: skip
+                         cells["paper"], cells["ours"], _budget(row, variant, costs)])  # fmt: skip
     kept = RESULTS / "curriculum" / "runs"
     for sampling in CURRICULA:
         runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
@@ -505,7 +586,7 @@ def main() -> None:
     r.add_argument("--arm", choices=("paper", "ours"), default="ours")
     r.add_argument("--variants", default=None, help="comma-separated; default: every variant")
     r.add_argument("--seeds", default="0,1,2")
-    r.add_argument("--steps", type=int, default=None, help="default: the row's budget")
+    r.add_argument("--steps", type=int, default=None, help="default: the variant's budget")
     r.add_argument(
         "--jobs",
         type=int,
@@ -534,12 +615,12 @@ def main() -> None:
         print(table())
         return
     spec = ROWS[args.row]
-    steps = args.steps or spec["steps"]
     variants = args.variants.split(",") if args.variants else list(spec["variants"])
     jobs = []
     for variant in variants:
         if variant not in spec["variants"]:
             raise SystemExit(f"{args.row}: no variant {variant!r}; known: {list(spec['variants'])}")
+        steps = args.steps or variant_spec(args.row, args.arm, variant)[2]
         for seed in (int(s) for s in args.seeds.split(",")):
             if result_path(args.row, args.arm, variant, seed, steps).exists():
                 print(f"kept: {args.row} {args.arm} {variant} seed {seed}")

@@ -97,7 +97,8 @@ def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
         f"2M per run: {paper['hours_per_run']:.1f} / {ours['hours_per_run']:.1f} h (paper's / ours)"
     )
     table4 = next(x for x in bench.table().splitlines() if "biped_lower_rn" in x)
-    assert table4.strip("|").split("|")[-1].strip() == "2M per run"  # not timed: no estimate
+    # not timed: no hours; our arm's budget with its base stage
+    assert table4.strip("|").split("|")[-1].strip() == "paper's 2M, ours 2M base + 4M per run"
 
 
 def test_fig6_falls_are_ranked_against_how_widely_each_run_sampled(
@@ -121,3 +122,42 @@ def test_fig6_falls_are_ranked_against_how_widely_each_run_sampled(
     got = bench.falls_against_sampling("ours")
     assert got["runs"] == 3 and got["spearman"] == -1.0
     assert bench.falls_against_sampling("paper") is None
+
+
+def test_our_arm_starts_from_a_base_stage_its_variants_share(
+    benchmark_module, tmp_path, monkeypatch
+):
+    """[WL19] Table 4 in our arm: the x0.5 family warm started from a base-body run of the same
+    seed, trained once and shared by RN on and off (budgets shrunk)."""
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "results")
+    monkeypatch.setattr(bench, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(bench, "EVAL", {"bodies": 2, "seconds": 0.5, "grid": 2})
+    row = dict(bench.ROWS["wl19_table4"])
+    row["base"] = {"configs/quadruped_x0.5.yaml": ("configs/quadruped_base.yaml", 4096)}
+    monkeypatch.setitem(bench.ROWS, "wl19_table4", row)
+
+    off = bench.run_one("wl19_table4", "ours", "quadruped_no_rn", 0, 4096, threads=1)
+    base = tmp_path / "runs" / "wl19_table4" / "ours" / "base_quadruped_base_s0"
+    assert off["config"] == "configs/quadruped_x0.5.yaml"
+    assert off["base"] == {"config": "configs/quadruped_base.yaml", "env_steps": 4096}
+    assert off["overrides"]["train.init_from"] == str(base)
+    assert off["overrides"]["env.reward.normalize"] is False
+    trained = checkpoint.load(checkpoint.resolve(base))
+    assert trained["progress"]["env_steps"] >= 4096
+    assert trained["config"]["shape_scale"] == 0.0  # the base body
+    family = tmp_path / "runs" / "wl19_table4" / "ours" / "quadruped_no_rn_s0"
+    used = checkpoint.load(checkpoint.resolve(family))["config"]
+    assert used["shape_scale"] == 0.5 and used["train"]["init_from"] == str(base)
+    assert used["ppo"]["minibatch_size"] == 512  # ours: no paper recipe (128) over the config
+
+    stamp = checkpoint.resolve(base).stat().st_mtime_ns
+    on = bench.run_one("wl19_table4", "ours", "quadruped_rn", 0, 4096, threads=1)
+    assert on["overrides"]["train.init_from"] == str(base)
+    assert checkpoint.resolve(base).stat().st_mtime_ns == stamp  # not trained again
+    assert bench.variant_spec("wl19_table4", "paper", "quadruped_rn") == (
+        "configs/quadruped.yaml",
+        {"env.reward.normalize": True},
+        2_000_000,
+        None,
+    )
