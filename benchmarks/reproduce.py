@@ -255,6 +255,44 @@ def cost(rows: list[str], iterations: int = 3) -> dict:
     return out
 
 
+def scales(bodies: int = EVAL["bodies"]) -> dict:
+    """What reward normalization does in each arm of [WL19] Table 4: its three scales ([WL19]
+    Table 1: velocity, direction, energy) over `bodies` shapes drawn as the evaluation draws
+    them, as the 5th and 95th percentiles and their ratio (how far apart RN moves the bodies'
+    rewards; 1 on the base body), for reproduce.json."""
+    from paramimic.config import load_config
+    from paramimic.envs import env_for
+    from paramimic.envs.reward_normalization import reward_scales
+
+    out: dict = {}
+    for variant in ROWS["wl19_table4"]["variants"]:
+        if not variant.endswith("_no_rn"):
+            continue
+        body_name = variant.removesuffix("_no_rn")
+        for arm in ("paper", "ours"):
+            config = variant_spec("wl19_table4", arm, variant)[0]
+            cfg = load_config(ROOT / config)
+            env = env_for(cfg)
+            space = cfg.task_space()
+            base = env.body_for(space.base(env.definition.param_names()))
+            tasks = space.sample(np.random.default_rng(EVAL_SEED), bodies)
+            found = np.array([
+                (r.velocity, r.direction, r.energy)
+                for b in map(env.body_for, tasks)
+                for r in [reward_scales(b.leg_lengths, base.leg_lengths, b.mass, base.mass)]
+            ])  # fmt: skip
+            env.close()
+            low, high = np.percentile(found, [5, 95], axis=0)
+            out.setdefault(body_name, {})[arm] = {
+                "config": config,
+                "bodies": bodies,
+                **{name: {"p5": float(lo), "p95": float(hi), "ratio": float(hi / lo)}
+                   for name, lo, hi in zip(("velocity", "direction", "energy"), low, high,
+                                           strict=True)},
+            }  # fmt: skip
+    return out
+
+
 def add_sampling() -> list[Path]:
     """Kept runs of a [WL19] row written without the sampler's concentration at their end get
     it from their run directory's checkpoint (the state they were evaluated in)."""
@@ -460,15 +498,19 @@ def _claim_ablation(arm: str) -> tuple[str, str]:
     return verdict, "lowest gravity " + " / ".join(f"{g:.2f}" for g in low) + " (A1 / A2 / A3)"
 
 
+def _curricula_runs() -> dict[str, list[dict]]:
+    """§7.3's runs per curriculum, in seed order: the ones `benchmarks/curriculum.py`'s
+    comparison (curriculum.json) was made of."""
+    path = RESULTS / "curriculum" / "curriculum.json"
+    runs = json.loads(path.read_text())["runs"] if path.exists() else []
+    return {s: sorted((r for r in runs if r["sampling"] == s), key=lambda r: r["seed"])
+            for s in CURRICULA}  # fmt: skip
+
+
 def _claim_curricula() -> tuple[str, str]:
     """[L21] §7.3: the curriculum explores more than each other curriculum at equal episodes
     (on the mean over the seeds; the seeds on which it does are named)."""
-    kept = RESULTS / "curriculum" / "runs"
-    er = {}
-    for sampling in CURRICULA:
-        runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
-        if runs:
-            er[sampling] = {r["seed"]: r for r in runs}
+    er = {s: {r["seed"]: r for r in runs} for s, runs in _curricula_runs().items() if runs}
     if set(er) != set(CURRICULA):
         return "not run yet", ""
     n = min(r["curve"][-1]["episodes"] for runs in er.values() for r in runs.values())
@@ -539,9 +581,7 @@ def table() -> str:
                     summary.setdefault(row, {}).setdefault(arm, {})[variant] = _summary(row, found)
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], _budget(row, variant, costs)])  # fmt: skip
-    kept = RESULTS / "curriculum" / "runs"
-    for sampling in CURRICULA:
-        runs = [json.loads(p.read_text()) for p in sorted(kept.glob(f"{sampling}_s*_*.json"))]
+    for sampling, runs in _curricula_runs().items():
         cell = "not run yet"
         if runs:
             er = [r["curve"][-1]["explored_ratio"] for r in runs]
@@ -571,7 +611,7 @@ def table() -> str:
     DOCS.write_text(text)
     OUT.mkdir(parents=True, exist_ok=True)
     out = {"rows": rows, "header": header, "claims": checked, "claims_header": claims_header,
-           "variants": summary,
+           "variants": summary, "rn_scales": scales(),
            "fig6_falls_against_sampling": {a: falls_against_sampling(a)
                                            for a in ("paper", "ours")}}  # fmt: skip
     (OUT / "reproduce.json").write_text(json.dumps(out, indent=1))

@@ -161,3 +161,20 @@ def test_our_arm_starts_from_a_base_stage_its_variants_share(
         2_000_000,
         None,
     )
+
+
+def test_rn_scales_spread_wider_over_the_papers_ranges_than_over_our_halved_ones(
+    benchmark_module,
+):
+    """What RN corrects in each arm of [WL19] Table 4: its scales over bodies drawn from the
+    arm's ranges; the paper's full ranges spread them further apart than our halved ones."""
+    bench = benchmark_module("reproduce")
+    found = bench.scales(bodies=60)
+    assert set(found) == {"biped_lower", "quadruped"}
+    for body, arms in found.items():
+        for arm in ("paper", "ours"):
+            for name in ("velocity", "direction", "energy"):
+                s = arms[arm][name]
+                assert 0.0 < s["p5"] <= s["p95"] and s["ratio"] >= 1.0, (body, arm, name)
+        for name in ("velocity", "energy"):
+            assert arms["paper"][name]["ratio"] > arms["ours"][name]["ratio"], (body, name)
