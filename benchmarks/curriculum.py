@@ -34,18 +34,27 @@ RESULTS = ROOT / "benchmarks" / "results" / "curriculum"
 
 
 def run(
-    config: str, sampling: str, steps: int, seed: int, run_dir: Path, threads: int | None = None
+    config: str,
+    sampling: str,
+    steps: int,
+    seed: int,
+    run_dir: Path,
+    threads: int | None = None,
+    recipe: str | None = None,
 ) -> dict:
     """One serial run of `sampling`; `threads`: the learner's torch threads (one per run when
-    runs share the machine; default: the config's, every core for a serial trainer)."""
+    runs share the machine; default: the config's, every core for a serial trainer); `recipe`:
+    the config at a paper's settings (every field of the recipe over the config's own)."""
     import torch
 
+    from paramimic import recipes
     from paramimic.config import load_config
     from paramimic.training.trainer import SerialBackend, Trainer
 
     cfg = load_config(
         ROOT / config,
-        {
+        (recipes.overrides(recipe) if recipe else {})
+        | {
             "curriculum.skill.sampling": sampling,
             "train.seed": seed,
             "train.run_dir": str(run_dir),
@@ -88,6 +97,7 @@ def run(
     return {
         "sampling": sampling,
         "seed": seed,
+        "recipe": recipe,
         "steps": steps,
         "seconds": time.perf_counter() - t0,
         "phase_switches": trainer.curriculum.phase.switches,
@@ -148,7 +158,7 @@ def compare(runs: list[dict]) -> dict:
     return out
 
 
-def plot(runs: list[dict], path: Path, config: str) -> None:
+def plot(runs: list[dict], path: Path, config: str, recipe: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -168,7 +178,8 @@ def plot(runs: list[dict], path: Path, config: str) -> None:
                 label=f"{sampling} (mean of {seeds})")  # fmt: skip
     ax.set_xlabel("episodes N")
     ax.set_ylabel("explored ratio ER")
-    ax.set_title(f"{Path(config).stem}: the curricula of [L21] §7.3 (Fig. 8)")
+    at = f" at recipe {recipe}" if recipe else ""
+    ax.set_title(f"{Path(config).stem}{at}: the curricula of [L21] §7.3 (Fig. 8)")
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -186,18 +197,25 @@ def main() -> None:
         "baseline), exploration_only, mastering, alternating ([L21] §7.3)",
     )
     p.add_argument("--jobs", type=int, default=2, help="runs at once, one process each")
-    p.add_argument("--out", default=str(RESULTS / "curriculum.json"))
+    p.add_argument(
+        "--recipe",
+        default=None,
+        help="run the config at a paper's settings (l21: [L21] §7's), kept apart from the "
+        "shipped config's runs; default out: curriculum_<recipe>.json",
+    )
+    p.add_argument("--out", default=None, help="default: curriculum.json (or per --recipe)")
     p.add_argument(
         "--add-elites",
         action="store_true",
         help="only add the final elite sets of the runs in --out from their checkpoints",
     )
     args = p.parse_args()
+    out = Path(args.out or RESULTS / f"curriculum{'_' + args.recipe if args.recipe else ''}.json")
+    prefix = f"{args.recipe}_" if args.recipe else ""
     if args.add_elites:
-        out = Path(args.out)
         result = json.loads(out.read_text())
         for r in result["runs"]:
-            run_dir = ROOT / "runs" / "bench_curriculum" / f"{r['sampling']}_s{r['seed']}"
+            run_dir = ROOT / "runs" / "bench_curriculum" / f"{prefix}{r['sampling']}_s{r['seed']}"
             r["elites"] = final_elites(run_dir)
             print(r["sampling"], r["seed"], r["elites"]["ranges"])
         out.write_text(json.dumps(result, indent=1))
@@ -208,7 +226,7 @@ def main() -> None:
     kept.mkdir(parents=True, exist_ok=True)
 
     def kept_path(sampling: str, seed: int) -> Path:
-        return kept / f"{sampling}_s{seed}_{args.steps}.json"
+        return kept / f"{prefix}{sampling}_s{seed}_{args.steps}.json"
 
     jobs = [
         (
@@ -216,8 +234,9 @@ def main() -> None:
             sampling,
             args.steps,
             seed,
-            ROOT / "runs" / "bench_curriculum" / f"{sampling}_s{seed}",
+            ROOT / "runs" / "bench_curriculum" / f"{prefix}{sampling}_s{seed}",
             1 if args.jobs > 1 else None,
+            args.recipe,
         )
         for seed in seeds
         for sampling in samplings
@@ -233,16 +252,16 @@ def main() -> None:
     ]
     result = {
         "config": args.config,
+        "recipe": args.recipe,
         "steps": args.steps,
         "seeds": seeds,
         "comparison": compare(runs),
         "runs": runs,
         "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:]),
     }
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
-    plot(runs, out.with_suffix(".png"), args.config)
+    plot(runs, out.with_suffix(".png"), args.config, args.recipe)
     print(json.dumps(result["comparison"], indent=1))
 
 

@@ -127,16 +127,6 @@ CURRICULA_PAPER = {
 }
 
 
-def paper_settings(recipe: str) -> dict:
-    """Every field of a paper's recipe as an override: in the paper arm the paper's setting
-    wins even where the row's config sets its own (a config's field otherwise wins)."""
-    from paramimic.recipes import preset
-
-    values = {k: list(s.value) if isinstance(s.value, tuple) else s.value
-              for k, s in preset(recipe).items()}  # fmt: skip
-    return {"recipe": recipe} | values
-
-
 def result_path(row: str, arm: str, variant: str, seed: int, steps: int) -> Path:
     return OUT / f"{row}_{arm}_{variant}_s{seed}_{steps // 1000}k.json"
 
@@ -163,11 +153,12 @@ def _config(
 ):  # fmt: skip
     """A variant's config in an arm, and the overrides that made it from the row's config
     (`warm`: started from its base stage's run, where it has one)."""
+    from paramimic import recipes
     from paramimic.config import load_config
 
     spec = ROWS[row]
     config, overrides, _, base = variant_spec(row, arm, variant)
-    overrides = (paper_settings(spec["recipe"]) if arm == "paper" else {}) | overrides
+    overrides = (recipes.overrides(spec["recipe"]) if arm == "paper" else {}) | overrides
     if base and warm:
         overrides = overrides | {"train.init_from": str(base_dir(row, arm, base[0], seed))}
     cfg = load_config(
@@ -498,20 +489,30 @@ def _claim_ablation(arm: str) -> tuple[str, str]:
     return verdict, "lowest gravity " + " / ".join(f"{g:.2f}" for g in low) + " (A1 / A2 / A3)"
 
 
-def _curricula_runs() -> dict[str, list[dict]]:
-    """§7.3's runs per curriculum, in seed order: the ones `benchmarks/curriculum.py`'s
-    comparison (curriculum.json) was made of."""
-    path = RESULTS / "curriculum" / "curriculum.json"
+def _curricula_runs(arm: str) -> dict[str, list[dict]]:
+    """§7.3's runs per curriculum in an arm, in seed order: the ones `benchmarks/curriculum.py`'s
+    comparison was made of (curriculum.json; at [L21]'s settings, its `--recipe l21` run's)."""
+    path = RESULTS / "curriculum" / ("curriculum_l21.json" if arm == "paper" else "curriculum.json")
     runs = json.loads(path.read_text())["runs"] if path.exists() else []
     return {s: sorted((r for r in runs if r["sampling"] == s), key=lambda r: r["seed"])
             for s in CURRICULA}  # fmt: skip
 
 
-def _claim_curricula() -> tuple[str, str]:
+def _curricula_cell(runs: list[dict]) -> str:
+    if not runs:
+        return "not run yet"
+    er = [r["curve"][-1]["explored_ratio"] for r in runs]
+    n = [r["curve"][-1]["episodes"] for r in runs]
+    return (f"ER {np.mean(er):.2f} at N = {np.mean(n):,.0f} (seeds "
+            + ", ".join(str(r["seed"]) for r in runs) + ": "
+            + " / ".join(f"{x:.2f}" for x in er) + ")")  # fmt: skip
+
+
+def _claim_curricula(arm: str) -> tuple[str, str]:
     """[L21] §7.3: the curriculum explores more than each other curriculum at equal episodes
     (on the mean over the seeds; the seeds on which it does are named)."""
-    er = {s: {r["seed"]: r for r in runs} for s, runs in _curricula_runs().items() if runs}
-    if set(er) != set(CURRICULA):
+    er = {s: {r["seed"]: r for r in runs} for s, runs in _curricula_runs(arm).items() if runs}
+    if set(er) != set(CURRICULA) or min(map(len, er.values())) < CLAIM_SEEDS:
         return "not run yet", ""
     n = min(r["curve"][-1]["episodes"] for runs in er.values() for r in runs.values())
 
@@ -540,13 +541,11 @@ def claims() -> list[list[str]]:
          lambda arm: _claim_rn(arm, "quadruped")),
         ("[WL19] Fig. 6", "the higher k, the more uniform (a lower CV at k = 10 than 0)", _claim_k),
         ("[L21] Table 2", "A3 explores lower gravity than A2, A2 than A1", _claim_ablation),
+        ("[L21] §7.3", "the curriculum explores the most at equal episodes", _claim_curricula),
     ]  # fmt: skip
     for paper, claim, check in checks:
         cells = [check(arm) for arm in ("paper", "ours")]
         rows.append([paper, claim, *(": ".join(x for x in c if x) for c in cells)])
-    cell = ": ".join(x for x in _claim_curricula() if x)
-    rows.append(["[L21] §7.3", "the curriculum explores the most at equal episodes",
-                 "not run yet", cell])  # fmt: skip
     return rows
 
 
@@ -581,18 +580,13 @@ def table() -> str:
                     summary.setdefault(row, {}).setdefault(arm, {})[variant] = _summary(row, found)
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], _budget(row, variant, costs)])  # fmt: skip
-    for sampling, runs in _curricula_runs().items():
-        cell = "not run yet"
-        if runs:
-            er = [r["curve"][-1]["explored_ratio"] for r in runs]
-            n = [r["curve"][-1]["episodes"] for r in runs]
-            cell = (f"ER {np.mean(er):.2f} at N = {np.mean(n):,.0f} (seeds "
-                    + ", ".join(str(r["seed"]) for r in runs) + ": "
-                    + " / ".join(f"{x:.2f}" for x in er) + ")")  # fmt: skip
-        steps = f"{runs[0]['steps'] / 1e6:.1f}M per run" if runs else ""
-        # `benchmarks/curriculum.py` runs the shipped config: the [L21] recipe's arm is not run
-        rows.append(["[L21] §7.3", sampling, CURRICULA_PAPER[sampling], "not run yet", cell,
-                     steps])  # fmt: skip
+    arms = {arm: _curricula_runs(arm) for arm in ("paper", "ours")}
+    for sampling in CURRICULA:
+        found = [arms[arm][sampling] for arm in ("paper", "ours")]
+        steps = " / ".join(dict.fromkeys(f"{r[0]['steps'] / 1e6:.1f}M" for r in found if r))
+        budget = f"{steps} per run" if steps else ""
+        rows.append(["[L21] §7.3", sampling, CURRICULA_PAPER[sampling],
+                     *map(_curricula_cell, found), budget])  # fmt: skip
     header = ["paper", "variant", "the paper's number", "paper's settings", "ours", "budget"]
     body = tabulate(rows, header, tablefmt="github")
     text = DOCS.read_text()

@@ -153,6 +153,15 @@ def preset(name: str) -> dict[str, Setting]:
     return PRESETS[name]
 
 
+def overrides(name: str) -> dict[str, Any]:
+    """Every field of recipe `name` as a dotted override, with `recipe` itself: the recipe's
+    setting then wins even where a config sets its own (a config's field otherwise wins), as
+    a run "at the paper's settings" wants."""
+    return {"recipe": name} | {
+        k: list(s.value) if isinstance(s.value, tuple) else s.value for k, s in preset(name).items()
+    }
+
+
 def flatten(data: Mapping, prefix: str = "") -> dict[str, Any]:
     """{'a': {'b': 1}} -> {'a.b': 1}: every nested mapping walked, an empty one a leaf."""
     out: dict[str, Any] = {}

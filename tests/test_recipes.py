@@ -11,7 +11,7 @@ import yaml
 
 from paramimic.config import ConfigError, ExperimentConfig, load_config
 from paramimic.envs import make_env
-from paramimic.recipes import PRESETS
+from paramimic.recipes import PRESETS, overrides
 
 
 def test_the_papers_settings_as_the_papers_state_them():
@@ -64,6 +64,19 @@ def test_a_field_the_config_sets_wins_over_its_recipe_and_the_rest_is_the_defaul
         character = "walker" if name != "paramimic_humanoid" else "humanoid"
         cfg = ExperimentConfig.model_validate({"character": character, "recipe": name})
         assert cfg.recipe == name and settings
+
+
+def test_a_recipe_as_overrides_wins_even_over_what_the_config_sets():
+    # "at the paper's settings": walker_jump.yaml sets its own 300 Hz and minibatch; the
+    # recipe as overrides puts [L21] §7's back, and names the recipe
+    shipped = load_config("configs/walker_jump.yaml")
+    assert shipped.env.physics_hz != 150
+    paper = load_config("configs/walker_jump.yaml", overrides("l21"))
+    assert paper.recipe == "l21" and paper.env.physics_hz == 150
+    assert paper.ppo.hidden_sizes == (1024,) * 4 and paper.ppo.minibatch_size == 1024
+    assert paper.curriculum.skill.sampling == shipped.curriculum.skill.sampling  # not in l21
+    with pytest.raises(ValueError, match="recipe: unknown 'dl18'"):
+        overrides("dl18")
 
 
 def test_an_unknown_recipe_is_refused_naming_the_field(tmp_path):
