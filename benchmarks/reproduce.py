@@ -485,8 +485,10 @@ def _claim_ablation(arm: str) -> tuple[str, str]:
     if not all(found.values()):
         return "not run yet", ""
     low = [_mean(x, lambda r: (r["ranges"].get("gravity") or [np.inf])[0]) for x in found.values()]
+    er = [_mean(x, lambda r: r["explored_ratio"]) for x in found.values()]
     verdict = "agrees" if low[0] >= low[1] >= low[2] and low[0] > low[2] else "disagrees"
-    return verdict, "lowest gravity " + " / ".join(f"{g:.2f}" for g in low) + " (A1 / A2 / A3)"
+    low_text, er_text = (" / ".join(f"{x:.2f}" for x in xs) for xs in (low, er))
+    return verdict, f"lowest gravity {low_text}; ER {er_text} (A1 / A2 / A3)"
 
 
 def _curricula_runs(arm: str) -> dict[str, list[dict]]:
