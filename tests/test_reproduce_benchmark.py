@@ -178,3 +178,49 @@ def test_rn_scales_spread_wider_over_the_papers_ranges_than_over_our_halved_ones
                 assert 0.0 < s["p5"] <= s["p95"] and s["ratio"] >= 1.0, (body, arm, name)
         for name in ("velocity", "energy"):
             assert arms["paper"][name]["ratio"] > arms["ours"][name]["ratio"], (body, name)
+
+
+def test_claims_are_judged_per_arm_once_every_variant_has_run_on_three_seeds(
+    benchmark_module, tmp_path, monkeypatch
+):
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "RESULTS", tmp_path)
+    monkeypatch.setattr(bench, "OUT", tmp_path / "reproduce")
+    bench.OUT.mkdir()
+
+    def keep(variant: str, seed: int, low_gravity: float) -> None:
+        er, ranges = 0.3 - low_gravity / 4, {"gravity": [low_gravity, 1.6]}
+        report = {"explored_ratio": er, "ranges": ranges}
+        bench.result_path("l21_table2", "ours", variant, seed, 1000).write_text(
+            json.dumps({"seed": seed, "report": report})
+        )
+
+    lowest = {"A1": 0.6, "A2": 0.4, "A3": 0.2}
+    for seed in (0, 1):
+        for variant, g in lowest.items():
+            keep(variant, seed, g)
+    assert bench._claim_ablation("ours") == ("not run yet", "")  # two seeds
+    for variant, g in lowest.items():
+        keep(variant, 2, g)
+    verdict, text = bench._claim_ablation("ours")
+    assert verdict == "agrees" and text == (
+        "lowest gravity 0.60 / 0.40 / 0.20; ER 0.15 / 0.20 / 0.25 (A1 / A2 / A3)"
+    )
+    keep("A3", 2, 1.0)  # one seed of A3 that explored no low gravity turns the mean around
+    assert bench._claim_ablation("ours")[0] == "disagrees"
+    assert bench._claim_ablation("paper") == ("not run yet", "")
+
+    # §7.3 at the paper's settings: read from benchmarks/curriculum.py --recipe l21's JSON
+    def run(sampling: str, seed: int) -> dict:
+        er = 0.5 if sampling == "uniform" else 0.2
+        curve = [{"episodes": 0, "explored_ratio": 0.0}, {"episodes": 100, "explored_ratio": er}]
+        return {"sampling": sampling, "seed": seed, "steps": 1000, "curve": curve}
+
+    (tmp_path / "curriculum").mkdir()
+    runs = [run(s, seed) for s in bench.CURRICULA for seed in (0, 1, 2)]
+    (tmp_path / "curriculum" / "curriculum_l21.json").write_text(json.dumps({"runs": runs}))
+    verdict, text = bench._claim_curricula("paper")
+    assert verdict == "disagrees" and "uniform 0.50" in text and "curriculum 0.20" in text
+    assert bench._claim_curricula("ours") == ("not run yet", "")
+    rows = [r for r in bench.claims() if r[0] == "[L21] §7.3"]
+    assert rows[0][2].startswith("disagrees: ER at N = 100") and rows[0][3] == "not run yet"
