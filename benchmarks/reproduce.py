@@ -21,7 +21,7 @@ benchmarks/results/reproduce/.
     python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--jobs 2]
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
     python benchmarks/reproduce.py cost         # what a run costs in each arm (cost.json)
-    python benchmarks/reproduce.py sampling     # the sampler's width into older [WL19] runs' JSON
+    python benchmarks/reproduce.py backfill     # measures added since into kept runs' JSON
     python benchmarks/reproduce.py list
 """
 
@@ -285,30 +285,40 @@ def scales(bodies: int = EVAL["bodies"]) -> dict:
     return out
 
 
-def add_sampling() -> list[Path]:
-    """Kept runs of a [WL19] row written without the sampler's concentration at their end get
-    it from their run directory's checkpoint (the state they were evaluated in)."""
+def backfill() -> list[Path]:
+    """Kept runs written before a measure was added get it from their run directory's
+    checkpoint (the state they were evaluated in): a [WL19] run the sampler's concentration at
+    its end, an [L21] run its elites' mean fitness."""
     from paramimic.config import ExperimentConfig
     from paramimic.curriculum.adaptive import AdaptiveCurriculum
     from paramimic.training import checkpoint
 
     done = []
-    for path in sorted(OUT.glob("wl19_*_s*_*k.json")):
+    for path in sorted(OUT.glob("*_s*_*k.json")):
         out = json.loads(path.read_text())
+        key = "sampling" if ROWS[out["row"]]["measure"] == "family" else "elite_mean_fitness"
         run_dir = RUNS / out["row"] / out["arm"] / f"{out['variant']}_s{out['seed']}"
-        if "sampling" in out["report"] or not checkpoint.checkpoint_dir(run_dir).is_dir():
+        if key in out["report"] or not checkpoint.checkpoint_dir(run_dir).is_dir():
             continue
         state = checkpoint.load(run_dir)
         if state["progress"]["env_steps"] != out["env_steps"]:
             continue  # trained on since: not the state that was evaluated
-        cfg = ExperimentConfig.model_validate(state["config"])
-        curriculum = AdaptiveCurriculum.from_config(cfg)
-        curriculum.from_state(state["curriculum"])
-        out["report"]["sampling"] = curriculum.concentration()
+        if key == "sampling":
+            curriculum = AdaptiveCurriculum.from_config(
+                ExperimentConfig.model_validate(state["config"])
+            )
+            curriculum.from_state(state["curriculum"])
+            out["report"][key] = curriculum.concentration()
+        else:
+            out["report"][key] = _mean_or_none(state["curriculum"]["elites"]["fitness"])
         path.write_text(json.dumps(out, indent=2))
         done.append(path)
-        print(f"sampling of {path.name}: {out['report']['sampling']}")
+        print(f"{key} of {path.name}: {out['report'][key]}")
     return done
+
+
+def _mean_or_none(values) -> float | None:
+    return float(np.mean(values)) if len(values) else None
 
 
 def run_one(
@@ -350,6 +360,7 @@ def run_one(
             "explored_ratio": c.explored_ratio(),
             "episodes": int(c.stats["episodes"]),
             "elites": int(len(live)),
+            "elite_mean_fitness": _mean_or_none(c.elites.fitness[live]),  # [L21] Eq. 10's F
             "ranges": {
                 n: [float(params[:, i].min()), float(params[:, i].max())] if len(params) else None
                 for i, n in enumerate(c.space.names)
@@ -408,6 +419,7 @@ def _summary(row: str, results: list[dict]) -> dict:
     else:
         per_seed = {
             "explored_ratio": [x["explored_ratio"] for x in reps],
+            "elite_mean_fitness": [x.get("elite_mean_fitness") for x in reps],
             **{f"{d}_{end}": [(x["ranges"].get(d) or [None, None])[i] for x in reps]
                for d in _ranges(reps) for i, end in enumerate(("low", "high"))},
         }  # fmt: skip
@@ -650,7 +662,7 @@ def main() -> None:
     c.add_argument("--rows", default=",".join(ROWS), help="comma-separated; default: every row")
     c.add_argument("--iterations", type=int, default=3)
     sub.add_parser("table")
-    sub.add_parser("sampling", help="the sampler's concentration into kept runs that lack it")
+    sub.add_parser("backfill", help="measures added since into kept runs, from their checkpoints")
     sub.add_parser("list")
     args = ap.parse_args()
     if args.cmd == "list":
@@ -661,8 +673,8 @@ def main() -> None:
     if args.cmd == "cost":
         cost(args.rows.split(","), args.iterations)
         return
-    if args.cmd == "sampling":
-        add_sampling()
+    if args.cmd == "backfill":
+        backfill()
         return
     if args.cmd == "table":
         print(table())

@@ -40,15 +40,23 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     bare = json.loads(kept.read_text())
     del bare["report"]["sampling"]
     kept.write_text(json.dumps(bare))
-    assert bench.add_sampling() == [kept]
+    assert bench.backfill() == [kept]
     assert json.loads(kept.read_text())["report"]["sampling"] == sampling
-    assert bench.add_sampling() == []  # nothing left to add
+    assert bench.backfill() == []  # nothing left to add
 
     # [L21] Table 2's A1 in our arm: the explored range of the elites
     a1 = bench.run_one("l21_table2", "ours", "A1", 0, 4096, threads=1)
     assert a1["overrides"] == {"curriculum.skill.motion_parameterization": False}
     assert 0.0 <= a1["report"]["explored_ratio"] <= 1.0
     assert set(a1["report"]["ranges"]) == {"gravity", "jump_height"}
+    fit = a1["report"]["elite_mean_fitness"]  # [L21] Eq. 10 of the elites, π0's at least
+    assert fit is not None and 0.0 < fit <= 1.0 + 0.1  # F plus w_constraint · r_constraint
+    kept_a1 = bench.result_path("l21_table2", "ours", "A1", 0, 4096)
+    bare = json.loads(kept_a1.read_text())
+    del bare["report"]["elite_mean_fitness"]
+    kept_a1.write_text(json.dumps(bare))
+    assert bench.backfill() == [kept_a1]
+    assert json.loads(kept_a1.read_text())["report"]["elite_mean_fitness"] == fit
 
     body = bench.table()
     line = next(x for x in body.splitlines() if "quadruped_no_rn" in x)
