@@ -10,7 +10,8 @@ Rows (ROWS below):
   the task space explored (ER, what §7.2 measures) and the range of each dimension the elites
   cover.
 - [L21] §7.3: ER against episodes for the baseline, exploration-only, mastering, alternating
-  and ours (the runs of `benchmarks/curriculum.py --samplings`, read from its kept JSON).
+  and ours (the runs of `benchmarks/curriculum.py --samplings`, read from its curriculum.json;
+  at the paper's settings from `--recipe l21`'s curriculum_l21.json).
 
 Each row runs in two arms: `paper` (the paper's recipe, `recipe: wl19` or `l21`: every
 departure switched to the paper's setting) and `ours` (the row's config as shipped). A run is
@@ -396,8 +397,8 @@ def _cell(row: str, results: list[dict]) -> str:
 def _ranges(reports: list[dict]) -> dict[str, tuple[float, float]]:
     """Per task dimension, the range the elites covered, its ends averaged over the runs that
     have elites."""
-    dims = dict.fromkeys(d for x in reports for d in x["ranges"])
-    return {d: tuple(float(np.mean([x["ranges"][d][i] for x in reports if d in x["ranges"]]))
+    dims = dict.fromkeys(d for x in reports for d, r in x["ranges"].items() if r)
+    return {d: tuple(float(np.mean([x["ranges"][d][i] for x in reports if x["ranges"].get(d)]))
                      for i in (0, 1))
             for d in dims}  # fmt: skip
 

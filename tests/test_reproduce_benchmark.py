@@ -217,6 +217,8 @@ def test_claims_are_judged_per_arm_once_every_variant_has_run_on_three_seeds(
     keep("A3", 2, 1.0)  # one seed of A3 that explored less turns the mean around
     assert bench._claim_ablation("ours")[0] == "disagrees"
     assert bench._claim_ablation("paper") == ("not run yet", "")
+    bare = {"seed": 0, "report": {"explored_ratio": 0.0, "ranges": {"gravity": None}}}
+    assert bench._cell("l21_table2", [bare]) == "ER 0.00 (0.00); no elites (seeds 0)"
 
     # §7.3 at the paper's settings: read from benchmarks/curriculum.py --recipe l21's JSON
     def run(sampling: str, seed: int) -> dict:
