@@ -120,6 +120,7 @@ ROWS: dict[str, dict] = {
     },
 }
 CURRICULA = ("uniform", "exploration_only", "mastering", "alternating", "curriculum")
+CURRICULA_STEPS = 1_500_000  # §7.3's budget per run (benchmarks/curriculum.py --steps)
 CURRICULA_PAPER = {
     "uniform": "none for a planar jump (humanoid Jump: 43 % explored)",
     "exploration_only": "none for a planar jump (humanoid Jump: 87 %)",
@@ -597,6 +598,42 @@ def _budget(row: str, variant: str, costs: dict) -> str:
     return f"{text}: {hours[0]:.1f} / {hours[1]:.1f} h ({arms})"
 
 
+def _curricula_budget(found: list[list[dict]], costs: dict) -> str:
+    """A §7.3 curriculum's budget (the steps its runs were given), with the hours a run takes
+    at the rates `cost` timed for [L21] Table 2, whose arms train the same config and recipes."""
+    steps = [runs[0]["steps"] if runs else CURRICULA_STEPS for runs in found]
+    text = " / ".join(dict.fromkeys(f"{s / 1e6:.1f}M" for s in steps)) + " per run"
+    if "l21_table2" not in costs:
+        return text
+    hours = [costs["l21_table2"][arm]["seconds_per_1k_steps"] * s / 1000 / 3600
+             for arm, s in zip(("paper", "ours"), steps, strict=True)]  # fmt: skip
+    return f"{text}: {hours[0]:.1f} / {hours[1]:.1f} h (paper's / ours, at Table 2's rates)"
+
+
+def total_hours(costs: dict) -> dict[str, float] | None:
+    """Hours every row of the table takes on CLAIM_SEEDS seeds in each arm, one run after the
+    other with both cores to each, at the rates `cost` timed (a base stage at its family's rate,
+    §7.3 at Table 2's); None until every row is timed."""
+    if set(costs) < set(ROWS):
+        return None
+    total = {}
+    for arm in ("paper", "ours"):
+        steps: dict[str, int] = {}
+        bases = {}
+        for row, spec in ROWS.items():
+            for variant in spec["variants"]:
+                _, _, budget, base = variant_spec(row, arm, variant)
+                steps[row] = steps.get(row, 0) + budget
+                if base:
+                    bases[base[0]] = (row, base[1])
+        for row, budget in bases.values():
+            steps[row] += budget
+        steps["l21_table2"] += len(CURRICULA) * CURRICULA_STEPS
+        total[arm] = sum(CLAIM_SEEDS * costs[row][arm]["seconds_per_1k_steps"] * n / 1000 / 3600
+                         for row, n in steps.items())  # fmt: skip
+    return total
+
+
 def table() -> str:
     rows = []
     cost_file = OUT / "cost.json"
@@ -615,10 +652,8 @@ def table() -> str:
     arms = {arm: _curricula_runs(arm) for arm in ("paper", "ours")}
     for sampling in CURRICULA:
         found = [arms[arm][sampling] for arm in ("paper", "ours")]
-        steps = " / ".join(dict.fromkeys(f"{r[0]['steps'] / 1e6:.1f}M" for r in found if r))
-        budget = f"{steps} per run" if steps else ""
         rows.append(["[L21] §7.3", sampling, CURRICULA_PAPER[sampling],
-                     *map(_curricula_cell, found), budget])  # fmt: skip
+                     *map(_curricula_cell, found), _curricula_budget(found, costs)])  # fmt: skip
     header = ["paper", "variant", "the paper's number", "paper's settings", "ours", "budget"]
     body = tabulate(rows, header, tablefmt="github")
     text = DOCS.read_text()
@@ -637,7 +672,7 @@ def table() -> str:
     DOCS.write_text(text)
     OUT.mkdir(parents=True, exist_ok=True)
     out = {"rows": rows, "header": header, "claims": checked, "claims_header": claims_header,
-           "variants": summary, "rn_scales": scales(),
+           "variants": summary, "rn_scales": scales(), "total_hours": total_hours(costs),
            "fig6_falls_against_sampling": {a: falls_against_sampling(a)
                                            for a in ("paper", "ours")}}  # fmt: skip
     (OUT / "reproduce.json").write_text(json.dumps(out, indent=1))

@@ -5,6 +5,8 @@ written from their JSON, through the benchmark's own code (budgets and evaluatio
 import json
 import shutil
 
+import pytest
+
 from paramimic.training import checkpoint
 
 
@@ -107,6 +109,24 @@ def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
     table4 = next(x for x in bench.table().splitlines() if "biped_lower_rn" in x)
     # not timed: no hours; our arm's budget with its base stage
     assert table4.strip("|").split("|")[-1].strip() == "paper's 2M, ours 2M base + 4M per run"
+    assert bench.total_hours(json.loads((tmp_path / "results" / "cost.json").read_text())) is None
+
+
+def test_the_whole_table_is_costed_with_base_stages_once_per_seed_and_the_curricula(
+    benchmark_module,
+):
+    bench = benchmark_module("reproduce")
+    rate = {"seconds_per_1k_steps": 1.0}  # one second per 1,000 env steps in every row and arm
+    costs = {row: {"paper": rate, "ours": rate} for row in bench.ROWS}
+    # the paper's arm: Table 4 4 x 2M, Fig. 6 4 x 2M, Table 2 3 x 2M, §7.3 5 x 1.5M = 29.5M;
+    # ours: Table 4 2 x 4M (biped) + 2 x 2M (quadruped) + two base stages of 2M, Fig. 6 8M,
+    # Table 2 6M, §7.3 7.5M = 37.5M; each on three seeds
+    assert bench.total_hours(costs) == pytest.approx(
+        {"paper": 3 * 29_500 / 3600, "ours": 3 * 37_500 / 3600}
+    )
+    costs["l21_table2"]["paper"] = {"seconds_per_1k_steps": 2.0}  # one arm of one row slower
+    budget = bench._curricula_budget([[], []], costs)
+    assert budget == "1.5M per run: 0.8 / 0.4 h (paper's / ours, at Table 2's rates)"
 
 
 def test_fig6_falls_are_ranked_against_how_widely_each_run_sampled(
