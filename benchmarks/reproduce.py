@@ -477,6 +477,18 @@ def _mean(results: list[dict], key) -> float:
     return float(np.mean([key(r["report"]) for r in results]))
 
 
+def _on_seeds(groups: list[list[dict]], holds) -> str:
+    """The seeds on which a claim holds, paired by seed across the groups of runs it compares
+    (`holds` takes one report per group): "on seeds 0, 2 of 0, 1, 2". A claim agrees on the
+    mean over the seeds; like a 3-seed target, it stands only where it holds on every seed."""
+    by = [{r["seed"]: r["report"] for r in g} for g in groups]
+    seeds = sorted(set.intersection(*(set(b) for b in by)))
+    wins = [seed for seed in seeds if holds(*(b[seed] for b in by))]
+    won = ", ".join(map(str, wins))
+    where = f"on seed{'s' if len(wins) > 1 else ''} {won}" if wins else "on no seed"
+    return f"{where} of {', '.join(map(str, seeds))}"
+
+
 def _claim_rn(arm: str, body: str) -> tuple[str, str]:
     """[WL19] Table 4: reward normalization raises task achievement and lowers falls."""
     on, off = (_seeded("wl19_table4", arm, f"{body}_{v}") for v in ("rn", "no_rn"))
@@ -485,8 +497,10 @@ def _claim_rn(arm: str, body: str) -> tuple[str, str]:
     task = [_mean(x, lambda r: r["task_achievement"]) for x in (on, off)]
     falls = [_mean(x, lambda r: r["fall_percent"]) for x in (on, off)]
     verdict = "agrees" if task[0] > task[1] and falls[0] < falls[1] else "disagrees"
+    seeds = _on_seeds([on, off], lambda a, b: a["task_achievement"] > b["task_achievement"]
+                      and a["fall_percent"] < b["fall_percent"])  # fmt: skip
     return verdict, (f"task {task[0]:.1f} vs {task[1]:.1f}, falls {falls[0]:.1f} % vs "
-                     f"{falls[1]:.1f} % (RN on vs off)")  # fmt: skip
+                     f"{falls[1]:.1f} % (RN on vs off); both {seeds}")  # fmt: skip
 
 
 def _claim_k(arm: str) -> tuple[str, str]:
@@ -495,13 +509,18 @@ def _claim_k(arm: str) -> tuple[str, str]:
     found = {k: _seeded("wl19_fig6", arm, f"k{k}") for k in (0, 5, 10, 20)}
     if not all(found.values()):
         return "not run yet", ""
-    cv = [_mean(x, lambda r: r["grid_uniformity"]["coefficient_of_variation"])
-          for x in found.values()]  # fmt: skip
+    cv = [_mean(x, _cv) for x in found.values()]
     # Fig. 6a against 6b: k = 0 against k = 10; and whether the CV falls at every step of k
     verdict = "agrees" if cv[0] > cv[2] else "disagrees"
     monotone = all(a > b for a, b in zip(cv, cv[1:], strict=False))
     steps = "falling at every step" if monotone else "not falling at every step"
-    return verdict, "CV " + " / ".join(f"{c:.3f}" for c in cv) + f" at k = 0 / 5 / 10 / 20, {steps}"
+    seeds = _on_seeds([found[0], found[10]], lambda a, b: _cv(a) > _cv(b))
+    return verdict, ("CV " + " / ".join(f"{c:.3f}" for c in cv)
+                     + f" at k = 0 / 5 / 10 / 20, {steps}; k = 10 below k = 0 {seeds}")  # fmt: skip
+
+
+def _cv(report: dict) -> float:
+    return report["grid_uniformity"]["coefficient_of_variation"]
 
 
 def _claim_ablation(arm: str) -> tuple[str, str]:
@@ -518,7 +537,11 @@ def _claim_ablation(arm: str) -> tuple[str, str]:
                              for s in spans.values())
         for d in dict.fromkeys(d for s in spans.values() for d in s)
     )  # fmt: skip
-    return verdict, f"ER {' / '.join(f'{e:.2f}' for e in er)}; {dims} (A1 / A2 / A3)"
+    seeds = _on_seeds(list(found.values()),
+                      lambda a1, a2, a3: a3["explored_ratio"] > a2["explored_ratio"]
+                      > a1["explored_ratio"])  # fmt: skip
+    return verdict, (f"ER {' / '.join(f'{e:.2f}' for e in er)}; {dims} (A1 / A2 / A3); "
+                     f"in that order {seeds}")  # fmt: skip
 
 
 def _curricula_runs(arm: str) -> dict[str, list[dict]]:
