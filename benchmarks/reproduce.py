@@ -414,6 +414,8 @@ def _summary(row: str, results: list[dict]) -> dict:
             "falls": [x["fall_percent"] for x in reps],
             "worst_decile": [x["worst_decile_return"] for x in reps],
             "cv": [x["grid_uniformity"]["coefficient_of_variation"] for x in reps],
+            "length_seconds": [x["mean_length_seconds"] for x in reps],  # of EVAL's 30 s
+            "speed": [x["mean_forward_speed"] for x in reps],
             # how narrowly the sampler drew at the end (`mcmc.concentration`)
             "effective_share": [(x.get("sampling") or {}).get("effective_share") for x in reps],
             "low_mass": [(x.get("sampling") or {}).get("low_mass") for x in reps],
