@@ -9,7 +9,8 @@ import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from paramimic.config import ExperimentConfig
-from paramimic.training.tracking import TensorBoardLog
+from paramimic.task_space import TaskSpace
+from paramimic.training.tracking import TensorBoardLog, marginal_figure
 from paramimic.training.trainer import train_serial
 
 WL19 = {
@@ -55,6 +56,22 @@ def test_a_wl19_run_writes_every_metric_per_env_step_and_the_marginal_value_map(
     assert acc.Scalars("curriculum/mu")[-1].value == np.float32(trainer.marginal.mu)
     assert "curriculum/marginal_value" in tags["images"]  # every checkpoint interval
     assert [e.step for e in acc.Images("curriculum/marginal_value")] == [512, 1024]
+
+
+def test_no_value_map_over_display_dims_that_do_not_vary():
+    """A base body's shape dims are points: no heatmap of V̄ over them (matplotlib would warn
+    of a singular extent and draw one colour), but one over dims that vary."""
+    ranges = {"leg_length": (1.0, 1.0), "torso_length": (1.0, 1.0),
+              "target_velocity": (0.5, 1.5), "gravity": (0.5, 1.0)}  # fmt: skip
+    space = TaskSpace.from_ranges(ranges)
+
+    def predict(pts):
+        return pts.sum(axis=1)
+
+    assert marginal_figure(space, ("leg_length", "torso_length"), predict) is None
+    assert marginal_figure(space, ("leg_length", "gravity"), predict) is None
+    fig = marginal_figure(space, ("target_velocity", "gravity"), predict, n=5)
+    assert fig is not None and fig.axes[0].get_xlabel() == "target_velocity"
 
 
 def test_an_l21_run_has_its_stage_elites_and_explored_ratio(tmp_path):

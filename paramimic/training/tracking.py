@@ -65,8 +65,9 @@ def scalars(row: Mapping, summary: CurriculumSummary | None = None) -> dict[str,
 
 def marginal_figure(space: TaskSpace, dims: tuple[str, ...], predict, n: int = 21):
     """[WL19]'s V̄ over the two display dims (others at the box centre) as a matplotlib
-    heatmap, or None without two display dims."""
-    if len(dims) != 2:
+    heatmap, or None without two display dims that vary (a base body's are points)."""
+    free = dict(zip(space.names, space.free, strict=True))
+    if len(dims) != 2 or not all(free.get(d) for d in dims):
         return None
     import matplotlib
 
