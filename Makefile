@@ -7,7 +7,7 @@ CONFIG ?= configs/walker_legs.yaml
 # every install takes its versions from constraints.txt (refresh it with `make lock`)
 PIP_C := -c constraints.txt
 
-.PHONY: train test test-deps lint bench clean gl rllib-venv lock docs
+.PHONY: train test test-deps lint bench clean gl rllib-venv lock docs reproduce
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -87,6 +87,11 @@ bench: $(VENV)/.installed-test rllib-venv
 	$(BIN)/python benchmarks/normalization.py all
 	$(BIN)/python benchmarks/reset_cost.py
 	$(BIN)/python benchmarks/physics_rate.py speed fidelity divergence
+
+# the papers against us, every row of docs/reproduce.md on 3 seeds (hours to days: resumable,
+# kept runs skipped; `python benchmarks/reproduce.py all --dry-run` lists what is left)
+reproduce: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/reproduce.py all --jobs 2
 
 clean:
 	rm -rf $(VENV) $(RLLIB) runs .pytest_cache site

@@ -33,6 +33,12 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "curriculum"
 
 
+def kept_run(sampling: str, seed: int, steps: int, recipe: str | None = None) -> Path:
+    """Where a finished run is kept (and found, so that it is not run again)."""
+    prefix = f"{recipe}_" if recipe else ""
+    return RESULTS / "runs" / f"{prefix}{sampling}_s{seed}_{steps}.json"
+
+
 def run(
     config: str,
     sampling: str,
@@ -222,11 +228,10 @@ def main() -> None:
         return
     seeds = [int(s) for s in args.seeds.split(",")]
     samplings = args.samplings.split(",")
-    kept = RESULTS / "runs"
-    kept.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "runs").mkdir(parents=True, exist_ok=True)
 
     def kept_path(sampling: str, seed: int) -> Path:
-        return kept / f"{prefix}{sampling}_s{seed}_{args.steps}.json"
+        return kept_run(sampling, seed, args.steps, args.recipe)
 
     jobs = [
         (

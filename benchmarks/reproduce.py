@@ -20,6 +20,7 @@ evaluated once at its budget; its JSON and the table's (reproduce.json) go to
 benchmarks/results/reproduce/.
 
     python benchmarks/reproduce.py run wl19_fig6 --arm ours --seeds 0,1,2 [--jobs 2]
+    python benchmarks/reproduce.py all [--dry-run]  # every row and §7.3, both arms, 3 seeds
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
     python benchmarks/reproduce.py cost         # what a run costs in each arm (cost.json)
     python benchmarks/reproduce.py backfill     # measures added since into kept runs' JSON
@@ -29,6 +30,7 @@ benchmarks/results/reproduce/.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import multiprocessing
 import time
@@ -44,6 +46,7 @@ DOCS = ROOT / "docs" / "reproduce.md"
 RUNS = ROOT / "runs" / "reproduce"
 EVAL_SEED = 10_000  # + the training seed: shapes the training never drew
 CLAIM_SEEDS = 3  # a claim is judged once every variant of its row has run on this many seeds
+SEEDS = list(range(CLAIM_SEEDS))  # the seeds `all` runs
 # [WL19] Table 4's evaluation: 300 bodies, falls within 30 s; Fig. 6's 7 x 7 grid of shapes
 EVAL = {"bodies": 300, "seconds": 30.0, "grid": 7}
 
@@ -182,17 +185,13 @@ def run_base(row: str, arm: str, base_config: str, steps: int, seed: int,
     import torch
 
     from paramimic.config import load_config
-    from paramimic.training import checkpoint
     from paramimic.training.trainer import train_serial
 
     run_dir = base_dir(row, arm, base_config, seed)
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     with open(run_dir.with_suffix(".lock"), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        done = checkpoint.checkpoint_dir(run_dir).is_dir() and (
-            checkpoint.load(run_dir)["progress"]["env_steps"] >= steps
-        )
-        if not done:
+        if not _trained(run_dir, steps):
             cfg = load_config(
                 ROOT / base_config,
                 {"train.seed": seed, "train.run_dir": str(run_dir)}
@@ -704,6 +703,105 @@ def table() -> str:
     return body
 
 
+def _jobs(row: str, arm: str, variants: list[str] | None, seeds: list[int],
+          steps: int | None = None) -> list[tuple]:  # fmt: skip
+    """The runs of a row in an arm not kept yet: (row, arm, variant, seed, steps)."""
+    spec = ROWS[row]
+    jobs = []
+    for variant in variants or spec["variants"]:
+        if variant not in spec["variants"]:
+            raise SystemExit(f"{row}: no variant {variant!r}; known: {list(spec['variants'])}")
+        budget = steps or variant_spec(row, arm, variant)[2]
+        jobs += [(row, arm, variant, seed, budget) for seed in seeds
+                 if not result_path(row, arm, variant, seed, budget).exists()]  # fmt: skip
+    return jobs
+
+
+def run_row(row: str, arm: str, variants: list[str] | None, seeds: list[int],
+            steps: int | None = None, jobs: int = 1) -> None:  # fmt: skip
+    """Every run of a row in an arm that is not kept yet, `jobs` at once."""
+    todo = _jobs(row, arm, variants, seeds, steps)
+    if jobs <= 1:
+        for job in todo:
+            run_one(*job)
+        return
+    with multiprocessing.get_context("spawn").Pool(jobs) as pool:
+        pool.starmap(run_one, [(*job, 1) for job in todo], chunksize=1)
+
+
+def _curricula_command(arm: str, jobs: int) -> list[str]:
+    """§7.3's runs in an arm: `benchmarks/curriculum.py`, our config as shipped or at [L21]'s."""
+    return (["--samplings", ",".join(CURRICULA), "--seeds", ",".join(map(str, SEEDS)),
+             "--steps", str(CURRICULA_STEPS), "--jobs", str(jobs)]
+            + (["--recipe", "l21"] if arm == "paper" else []))  # fmt: skip
+
+
+@functools.cache
+def curriculum_benchmark():
+    """benchmarks/curriculum.py, which runs and keeps §7.3's curricula, as a module."""
+    import importlib.util
+
+    path = ROOT / "benchmarks" / "curriculum.py"
+    spec = importlib.util.spec_from_file_location("curriculum_bench", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def pending(arms: list[str]) -> list[tuple[str, float | None]]:
+    """What `all` has left to run, with the hours each takes at cost.json's rates (both cores
+    to it; §7.3 at Table 2's rates; a base stage not trained yet adds its own)."""
+    curriculum = curriculum_benchmark()
+    cost_file = OUT / "cost.json"
+    costs = json.loads(cost_file.read_text()) if cost_file.exists() else {}
+
+    def hours(row: str, arm: str, steps: int) -> float | None:
+        rate = costs.get(row, {}).get(arm, {}).get("seconds_per_1k_steps")
+        return None if rate is None else rate * steps / 1000 / 3600
+
+    left = []
+    for arm in arms:
+        bases = set()
+        for row in ROWS:
+            for _, _, variant, seed, steps in _jobs(row, arm, None, SEEDS):
+                base = variant_spec(row, arm, variant)[3]
+                h = hours(row, arm, steps)
+                if base and (base[0], seed) not in bases and not _trained(
+                        base_dir(row, arm, base[0], seed), base[1]):  # fmt: skip
+                    bases.add((base[0], seed))
+                    h = None if h is None else h + hours(row, arm, base[1])
+                left.append((f"{row} {arm} {variant} seed {seed}", h))
+        for sampling in CURRICULA:
+            for seed in SEEDS:
+                recipe = "l21" if arm == "paper" else None
+                if not curriculum.kept_run(sampling, seed, CURRICULA_STEPS, recipe).exists():
+                    left.append((f"§7.3 {arm} {sampling} seed {seed}",
+                                 hours("l21_table2", arm, CURRICULA_STEPS)))  # fmt: skip
+    return left
+
+
+def _trained(run_dir: Path, steps: int) -> bool:
+    from paramimic.training import checkpoint
+
+    return checkpoint.checkpoint_dir(run_dir).is_dir() and (
+        checkpoint.load(run_dir)["progress"]["env_steps"] >= steps
+    )
+
+
+def run_all(arms: list[str], jobs: int) -> None:
+    """Every row in each arm on the claims' seeds, then §7.3's curricula, then the table: what
+    is kept is skipped, what was stopped resumes."""
+    import subprocess
+    import sys
+
+    for arm in arms:
+        for row in ROWS:
+            run_row(row, arm, None, SEEDS, None, jobs)
+        script = str(ROOT / "benchmarks" / "curriculum.py")
+        subprocess.run([sys.executable, script, *_curricula_command(arm, jobs)], check=True)
+    print(table())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -722,6 +820,11 @@ def main() -> None:
     c = sub.add_parser("cost", help="time a few iterations of each row in each arm")
     c.add_argument("--rows", default=",".join(ROWS), help="comma-separated; default: every row")
     c.add_argument("--iterations", type=int, default=3)
+    a = sub.add_parser("all", help="every row and §7.3 in each arm on the claims' seeds, then "
+                       "the table (kept runs skipped, stopped ones resumed)")  # fmt: skip
+    a.add_argument("--arms", default="ours,paper")
+    a.add_argument("--jobs", type=int, default=2, help="runs at once (2 on a 2-core machine)")
+    a.add_argument("--dry-run", action="store_true", help="list what is left, with its hours")
     sub.add_parser("table")
     sub.add_parser("backfill", help="measures added since into kept runs, from their checkpoints")
     sub.add_parser("list")
@@ -740,24 +843,20 @@ def main() -> None:
     if args.cmd == "table":
         print(table())
         return
-    spec = ROWS[args.row]
-    variants = args.variants.split(",") if args.variants else list(spec["variants"])
-    jobs = []
-    for variant in variants:
-        if variant not in spec["variants"]:
-            raise SystemExit(f"{args.row}: no variant {variant!r}; known: {list(spec['variants'])}")
-        steps = args.steps or variant_spec(args.row, args.arm, variant)[2]
-        for seed in (int(s) for s in args.seeds.split(",")):
-            if result_path(args.row, args.arm, variant, seed, steps).exists():
-                print(f"kept: {args.row} {args.arm} {variant} seed {seed}")
-                continue
-            jobs.append((args.row, args.arm, variant, seed, steps))
-    if args.jobs <= 1:
-        for job in jobs:
-            run_one(*job)
+    if args.cmd == "all":
+        arms = args.arms.split(",")
+        if args.dry_run:
+            left = pending(arms)
+            for what, hours in left:
+                print(f"{what}: {hours:.1f} h" if hours is not None else what)
+            known = [h for _, h in left if h is not None]
+            print(f"{len(left)} runs left, {sum(known):.0f} h at cost.json's rates")
+            return
+        run_all(arms, args.jobs)
         return
-    with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
-        pool.starmap(run_one, [(*job, 1) for job in jobs], chunksize=1)
+    variants = args.variants.split(",") if args.variants else None
+    seeds = [int(s) for s in args.seeds.split(",")]
+    run_row(args.row, args.arm, variants, seeds, args.steps, args.jobs)
 
 
 if __name__ == "__main__":

@@ -258,3 +258,45 @@ def test_claims_are_judged_per_arm_once_every_variant_has_run_on_three_seeds(
     assert bench._claim_curricula("ours") == ("not run yet", "")
     rows = [r for r in bench.claims() if r[0] == "[L21] §7.3"]
     assert rows[0][2].startswith("disagrees: ER at N = 100") and rows[0][3] == "not run yet"
+
+
+def test_all_leaves_what_is_kept_and_costs_what_is_left(benchmark_module, tmp_path, monkeypatch):
+    """`reproduce.py all --dry-run`: every run of every row and §7.3 curriculum not kept yet, on
+    the claims' seeds, with its hours at cost.json's rates (a base stage not trained yet adds
+    its own, once per seed)."""
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "reproduce")
+    monkeypatch.setattr(bench, "RUNS", tmp_path / "runs")
+    curriculum = bench.curriculum_benchmark()
+    monkeypatch.setattr(curriculum, "RESULTS", tmp_path / "curriculum")
+    bench.OUT.mkdir()
+    (tmp_path / "curriculum" / "runs").mkdir(parents=True)
+    for row in bench.ROWS:  # our arm kept, but for one biped seed, RN off
+        for variant in bench.ROWS[row]["variants"]:
+            for seed in bench.SEEDS:
+                steps = bench.variant_spec(row, "ours", variant)[2]
+                if (row, variant, seed) != ("wl19_table4", "biped_lower_no_rn", 1):
+                    bench.result_path(row, "ours", variant, seed, steps).write_text("{}")
+    for sampling in bench.CURRICULA:
+        for seed in bench.SEEDS:
+            if (sampling, seed) != ("mastering", 2):
+                curriculum.kept_run(sampling, seed, bench.CURRICULA_STEPS).write_text("{}")
+
+    assert bench.pending(["ours"]) == [
+        ("wl19_table4 ours biped_lower_no_rn seed 1", None),  # no cost.json: hours unknown
+        ("§7.3 ours mastering seed 2", None),
+    ]
+    rate = {"seconds_per_1k_steps": 1.8}  # 1 h per 2M env steps
+    costs = {row: {"paper": rate, "ours": rate} for row in bench.ROWS}
+    (bench.OUT / "cost.json").write_text(json.dumps(costs))
+    # the biped's family stage (4M) and its base stage (2M), which nothing has trained yet
+    assert bench.pending(["ours"]) == [
+        ("wl19_table4 ours biped_lower_no_rn seed 1", pytest.approx(3.0)),
+        ("§7.3 ours mastering seed 2", pytest.approx(0.75)),
+    ]
+    left = bench.pending(["paper"])  # nothing of the paper's arm is kept: every run, no bases
+    runs = sum(len(spec["variants"]) for spec in bench.ROWS.values()) + len(bench.CURRICULA)
+    assert len(left) == 3 * runs
+    assert sum(h for _, h in left) == pytest.approx(3 * (11 * 1.0 + 5 * 0.75))
+    assert bench._curricula_command("paper", 2)[-2:] == ["--recipe", "l21"]
+    assert "--recipe" not in bench._curricula_command("ours", 2)
