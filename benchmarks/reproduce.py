@@ -721,6 +721,8 @@ def run_row(row: str, arm: str, variants: list[str] | None, seeds: list[int],
             steps: int | None = None, jobs: int = 1) -> None:  # fmt: skip
     """Every run of a row in an arm that is not kept yet, `jobs` at once."""
     todo = _jobs(row, arm, variants, seeds, steps)
+    print(f"{row} {arm}: {len(todo)} runs to train" + "".join(
+        f"\n  {variant} seed {seed}" for _, _, variant, seed, _ in todo))  # fmt: skip
     if jobs <= 1:
         for job in todo:
             run_one(*job)
@@ -845,6 +847,8 @@ def main() -> None:
         return
     if args.cmd == "all":
         arms = args.arms.split(",")
+        if set(arms) - {"paper", "ours"}:
+            raise SystemExit(f"--arms: {args.arms!r}; each arm is paper or ours")
         if args.dry_run:
             left = pending(arms)
             for what, hours in left:
