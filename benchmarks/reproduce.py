@@ -288,8 +288,10 @@ def scales(bodies: int = EVAL["bodies"]) -> dict:
 
 def backfill() -> list[Path]:
     """Kept runs written before a measure was added get it from their run directory's
-    checkpoint (the state they were evaluated in): a [WL19] run the sampler's concentration at
-    its end, an [L21] run its elites' mean fitness."""
+    checkpoint (the state they were evaluated in): a [WL19] run the sampler's concentration and
+    the training range's width at its end, an [L21] run its elites' mean fitness. Without the
+    checkpoint, a run whose config never grows its range gets its width from the config (the
+    whole range, from start to end)."""
     from paramimic.config import ExperimentConfig
     from paramimic.curriculum.adaptive import AdaptiveCurriculum
     from paramimic.training import checkpoint
@@ -297,25 +299,44 @@ def backfill() -> list[Path]:
     done = []
     for path in sorted(OUT.glob("*_s*_*k.json")):
         out = json.loads(path.read_text())
-        key = "sampling" if ROWS[out["row"]]["measure"] == "family" else "elite_mean_fitness"
+        family = ROWS[out["row"]]["measure"] == "family"
+        keys = ("sampling", "range_width") if family else ("elite_mean_fitness",)
         run_dir = RUNS / out["row"] / out["arm"] / f"{out['variant']}_s{out['seed']}"
-        if key in out["report"] or not checkpoint.checkpoint_dir(run_dir).is_dir():
+        missing = [k for k in keys if k not in out["report"]]
+        if not missing:
             continue
-        state = checkpoint.load(run_dir)
-        if state["progress"]["env_steps"] != out["env_steps"]:
-            continue  # trained on since: not the state that was evaluated
-        if key == "sampling":
+        state = checkpoint.load(run_dir) if checkpoint.checkpoint_dir(run_dir).is_dir() else None
+        if state is not None and state["progress"]["env_steps"] != out["env_steps"]:
+            state = None  # trained on since: not the state that was evaluated
+        if state is None:
+            cfg, _ = _config(out["row"], out["arm"], out["variant"], out["seed"], run_dir, None,
+                             warm=False)  # fmt: skip
+            measures = {"range_width": 1.0} if family and cfg.curriculum.widen is None else {}
+        elif family:
             curriculum = AdaptiveCurriculum.from_config(
                 ExperimentConfig.model_validate(state["config"])
             )
             curriculum.from_state(state["curriculum"])
-            out["report"][key] = curriculum.concentration()
+            measures = _family_state(curriculum)
         else:
-            out["report"][key] = _mean_or_none(state["curriculum"]["elites"]["fitness"])
+            measures = {
+                "elite_mean_fitness": _mean_or_none(state["curriculum"]["elites"]["fitness"])
+            }
+        added = {k: measures[k] for k in missing if k in measures}
+        if not added:
+            continue
+        out["report"].update(added)
         path.write_text(json.dumps(out, indent=2))
         done.append(path)
-        print(f"{key} of {path.name}: {out['report'][key]}")
+        print(f"{', '.join(added)} of {path.name}: " + ", ".join(map(str, added.values())))
     return done
+
+
+def _family_state(curriculum) -> dict:
+    """Where a [WL19] run's sampler stood at its end: how narrowly it drew
+    (`mcmc.concentration`) and the share of the shape ranges it trained on (1 unless the config
+    grows its range from the base body, `curriculum.widen`; the evaluation draws from all of it)."""
+    return {"sampling": curriculum.concentration(), "range_width": float(curriculum.width)}
 
 
 def _mean_or_none(values) -> float | None:
@@ -352,7 +373,7 @@ def run_one(
                                  EVAL["grid"], EVAL["seconds"])  # fmt: skip
         grid = report.pop("grid")
         out["report"] = report | {"grid_uniformity": grid["uniformity"],
-                                  "sampling": trainer.curriculum.concentration()}  # fmt: skip
+                                  **_family_state(trainer.curriculum)}  # fmt: skip
     else:
         c = trainer.curriculum
         live = c.elites.live()
@@ -385,9 +406,12 @@ def _cell(row: str, results: list[dict]) -> str:
         task = [x["task_achievement"] for x in reps]
         worst = [x["worst_decile_return"] for x in reps]
         cv = [x["grid_uniformity"]["coefficient_of_variation"] for x in reps]
+        widths = [x.get("range_width") for x in reps]
+        grown = ("" if None in widths or min(widths) >= 1.0 else "; trained on "
+                 + " / ".join(f"{100 * w:.0f}" for w in widths) + " % of the ranges")  # fmt: skip
         return (f"{np.mean(task):.1f} task, {np.mean(falls):.1f} % falls, worst decile "
                 f"{np.mean(worst):.1f}, CV {np.mean(cv):.2f} (seeds {seeds}; falls "
-                + " / ".join(f"{f:.1f}" for f in falls) + ")")  # fmt: skip
+                + " / ".join(f"{f:.1f}" for f in falls) + grown + ")")  # fmt: skip
     er = [x["explored_ratio"] for x in reps]
     spans = "; ".join(f"{dim} [{lo:.2f}, {hi:.2f}]" for dim, (lo, hi) in _ranges(reps).items())
     return (f"ER {np.mean(er):.2f} ({' / '.join(f'{e:.2f}' for e in er)}); {spans or 'no elites'}"
@@ -418,6 +442,7 @@ def _summary(row: str, results: list[dict]) -> dict:
             # how narrowly the sampler drew at the end (`mcmc.concentration`)
             "effective_share": [(x.get("sampling") or {}).get("effective_share") for x in reps],
             "low_mass": [(x.get("sampling") or {}).get("low_mass") for x in reps],
+            "range_width": [x.get("range_width") for x in reps],
         }
     else:
         per_seed = {

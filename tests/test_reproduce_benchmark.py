@@ -38,12 +38,14 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     # how narrowly [WL19] Eq. 10 drew at the run's end (uniform while μ ≤ 0, as this early)
     sampling = report["sampling"]
     assert 0.0 < sampling["effective_share"] <= 1.0 and 0.0 <= sampling["low_mass"] <= 1.0
-    # a run kept without it gets it back from its run directory's checkpoint
+    assert report["range_width"] == 1.0  # the paper's ranges from the start: no `widen`
+    # a run kept without them gets them back from its run directory's checkpoint
     bare = json.loads(kept.read_text())
-    del bare["report"]["sampling"]
+    del bare["report"]["sampling"], bare["report"]["range_width"]
     kept.write_text(json.dumps(bare))
     assert bench.backfill() == [kept]
     assert json.loads(kept.read_text())["report"]["sampling"] == sampling
+    assert json.loads(kept.read_text())["report"]["range_width"] == 1.0
     assert bench.backfill() == []  # nothing left to add
 
     # [L21] Table 2's A1 in our arm: the explored range of the elites
@@ -189,6 +191,48 @@ def test_our_arm_starts_from_a_base_stage_its_variants_share(
         2_000_000,
         None,
     )
+
+
+def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
+    benchmark_module, tmp_path, monkeypatch
+):
+    """Our biped grows its range from the base body (`widen`); the evaluation draws from all of
+    it, so a kept run says how far the training range had grown."""
+    from paramimic.config import load_config
+    from paramimic.curriculum.adaptive import AdaptiveCurriculum
+
+    bench = benchmark_module("reproduce")
+    monkeypatch.setattr(bench, "OUT", tmp_path / "results")
+    monkeypatch.setattr(bench, "RUNS", tmp_path / "runs")
+    grown = AdaptiveCurriculum.from_config(load_config(bench.ROOT / "configs/biped_x0.5.yaml"))
+    assert bench._family_state(grown)["range_width"] == 0.05  # widen.start
+    grown.width = 0.6
+    assert bench._family_state(grown)["range_width"] == 0.6
+    whole = AdaptiveCurriculum.from_config(load_config(bench.ROOT / "configs/quadruped_x0.5.yaml"))
+    assert bench._family_state(whole)["range_width"] == 1.0
+
+    def kept(seed: int, width: float | None) -> dict:
+        grid = {"coefficient_of_variation": 0.5}
+        report = {"fall_percent": 50.0, "task_achievement": 40.0, "worst_decile_return": 20.0,
+                  "grid_uniformity": grid, "range_width": width}  # fmt: skip
+        return {"seed": seed, "report": report}
+
+    cell = bench._cell("wl19_table4", [kept(0, 0.6), kept(1, 1.0)])
+    assert cell.endswith("falls 50.0 / 50.0; trained on 60 / 100 % of the ranges)")
+    assert "trained on" not in bench._cell("wl19_table4", [kept(0, 1.0), kept(1, 1.0)])
+    assert "trained on" not in bench._cell("wl19_table4", [kept(0, None)])  # kept before it
+
+    # kept before the width was, its run directory gone: the config says it where it can
+    bench.OUT.mkdir()
+    for variant in ("quadruped_rn", "biped_lower_rn"):
+        old = {"row": "wl19_table4", "arm": "ours", "variant": variant, "seed": 0,
+               "env_steps": 2000, "report": {"sampling": {"effective_share": 0.1}}}  # fmt: skip
+        bench.result_path("wl19_table4", "ours", variant, 0, 2000).write_text(json.dumps(old))
+    quadruped = bench.result_path("wl19_table4", "ours", "quadruped_rn", 0, 2000)
+    assert bench.backfill() == [quadruped]  # never widened: the whole range throughout
+    assert json.loads(quadruped.read_text())["report"]["range_width"] == 1.0
+    biped = bench.result_path("wl19_table4", "ours", "biped_lower_rn", 0, 2000)
+    assert "range_width" not in json.loads(biped.read_text())["report"]  # only its run knew
 
 
 def test_rn_scales_spread_wider_over_the_papers_ranges_than_over_our_halved_ones(
