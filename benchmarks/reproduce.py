@@ -75,8 +75,9 @@ ROWS: dict[str, dict] = {
             "configs/biped_x0.5.yaml": ("configs/biped_base.yaml", 2_000_000),
             "configs/quadruped_x0.5.yaml": ("configs/quadruped_base.yaml", 2_000_000),
         },
-        # the biped's family stage needs longer (4M: 56 % falls in the study, 2M: 90 %)
-        "ours_steps": {"configs/biped_x0.5.yaml": 4_000_000},
+        # the biped's family stage: what configs/biped_x0.5.yaml ships (the families study: its
+        # range has not grown to the whole family by half of it)
+        "ours_steps": {"configs/biped_x0.5.yaml": 8_000_000},
         "recipe": "wl19",
         "steps": 2_000_000,
         "measure": "family",
@@ -487,10 +488,40 @@ def departures() -> str:
     return tabulate(rows, ["field", "library default", *names], tablefmt="github")
 
 
+def _by_budget(row: str, arm: str, variant: str) -> dict[int, list[dict]]:
+    """A variant's kept runs in an arm by their budget in env steps, the smallest first."""
+    found: dict[int, list[dict]] = {}
+    for p in sorted(OUT.glob(f"{row}_{arm}_{variant}_s*_*k.json")):
+        steps = int(p.stem.rsplit("_", 1)[1].removesuffix("k")) * 1000
+        found.setdefault(steps, []).append(json.loads(p.read_text()))
+    return dict(sorted(found.items()))
+
+
 def _results(row: str, arm: str, variant: str) -> list[dict]:
-    return [
-        json.loads(p.read_text()) for p in sorted(OUT.glob(f"{row}_{arm}_{variant}_s*_*k.json"))
-    ]
+    """A variant's runs at the largest budget it has kept runs of (a budget raised later
+    supersedes the runs kept at the old one; they stay in reproduce.json's `earlier`)."""
+    found = _by_budget(row, arm, variant)
+    return found[max(found)] if found else []
+
+
+def _short_of_budget(row: str, arm: str, variants: list[str]) -> str:
+    """ "at 4M of 8M" where the latest kept runs of any of the variants are short of its budget
+    (kept before the budget was raised; "" otherwise)."""
+    for variant in variants:
+        budgets = _by_budget(row, arm, variant)
+        target = variant_spec(row, arm, variant)[2]
+        if budgets and max(budgets) < target:
+            return f"at {max(budgets) / 1e6:g}M of {target / 1e6:g}M"
+    return ""
+
+
+def _kept_summary(row: str, arm: str, variant: str) -> dict:
+    """`_summary` of a variant's runs at its largest budget, with those kept at smaller ones
+    under `earlier` (by budget: "4000k")."""
+    budgets = _by_budget(row, arm, variant)
+    latest = _summary(row, budgets.pop(max(budgets)))
+    earlier = {f"{b // 1000}k": _summary(row, r) for b, r in budgets.items()}
+    return latest | ({"earlier": earlier} if earlier else {})
 
 
 def _seeded(row: str, arm: str, variant: str) -> list[dict]:
@@ -525,8 +556,10 @@ def _claim_rn(arm: str, body: str) -> tuple[str, str]:
     verdict = "agrees" if task[0] > task[1] and falls[0] < falls[1] else "disagrees"
     seeds = _on_seeds([on, off], lambda a, b: a["task_achievement"] > b["task_achievement"]
                       and a["fall_percent"] < b["fall_percent"])  # fmt: skip
+    short = _short_of_budget("wl19_table4", arm, [f"{body}_rn", f"{body}_no_rn"])
     return verdict, (f"task {task[0]:.1f} vs {task[1]:.1f}, falls {falls[0]:.1f} % vs "
-                     f"{falls[1]:.1f} % (RN on vs off); both {seeds}")  # fmt: skip
+                     f"{falls[1]:.1f} % (RN on vs off); both {seeds}"
+                     + (f"; {short}" if short else ""))  # fmt: skip
 
 
 def _claim_k(arm: str) -> tuple[str, str]:
@@ -693,9 +726,12 @@ def table() -> str:
             cells = {}
             for arm in ("paper", "ours"):
                 found = _results(row, arm, variant)
-                cells[arm] = _cell(row, found)
+                short = _short_of_budget(row, arm, [variant]) if found else ""
+                cells[arm] = _cell(row, found) + (f", {short}" if short else "")
                 if found:
-                    summary.setdefault(row, {}).setdefault(arm, {})[variant] = _summary(row, found)
+                    summary.setdefault(row, {}).setdefault(arm, {})[variant] = _kept_summary(
+                        row, arm, variant
+                    )
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], _budget(row, variant, costs)])  # fmt: skip
     arms = {arm: _curricula_runs(arm) for arm in ("paper", "ours")}
@@ -792,7 +828,8 @@ def pending(arms: list[str]) -> list[tuple[str, float | None]]:
         for row in ROWS:
             for _, _, variant, seed, steps in _jobs(row, arm, None, SEEDS):
                 base = variant_spec(row, arm, variant)[3]
-                h = hours(row, arm, steps)
+                done = _trained_steps(RUNS / row / arm / f"{variant}_s{seed}")  # resumed there
+                h = hours(row, arm, max(0, steps - done))
                 if base and (base[0], seed) not in bases and not _trained(
                         base_dir(row, arm, base[0], seed), base[1]):  # fmt: skip
                     bases.add((base[0], seed))
@@ -807,12 +844,17 @@ def pending(arms: list[str]) -> list[tuple[str, float | None]]:
     return left
 
 
-def _trained(run_dir: Path, steps: int) -> bool:
+def _trained_steps(run_dir: Path) -> int:
+    """The env steps a run directory's checkpoint holds (0 without one)."""
     from paramimic.training import checkpoint
 
-    return checkpoint.checkpoint_dir(run_dir).is_dir() and (
-        checkpoint.load(run_dir)["progress"]["env_steps"] >= steps
-    )
+    if not checkpoint.checkpoint_dir(run_dir).is_dir():
+        return 0
+    return int(checkpoint.load(run_dir)["progress"]["env_steps"])
+
+
+def _trained(run_dir: Path, steps: int) -> bool:
+    return _trained_steps(run_dir) >= steps
 
 
 def run_all(arms: list[str], jobs: int) -> None:

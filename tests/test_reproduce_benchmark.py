@@ -110,7 +110,7 @@ def test_what_a_run_costs_in_each_arm_is_timed_and_in_the_budget_column(
     )
     table4 = next(x for x in bench.table().splitlines() if "biped_lower_rn" in x)
     # not timed: no hours; our arm's budget with its base stage
-    assert table4.strip("|").split("|")[-1].strip() == "paper's 2M, ours 2M base + 4M per run"
+    assert table4.strip("|").split("|")[-1].strip() == "paper's 2M, ours 2M base + 8M per run"
     assert bench.total_hours(json.loads((tmp_path / "results" / "cost.json").read_text())) is None
 
 
@@ -121,10 +121,10 @@ def test_the_whole_table_is_costed_with_base_stages_once_per_seed_and_the_curric
     rate = {"seconds_per_1k_steps": 1.0}  # one second per 1,000 env steps in every row and arm
     costs = {row: {"paper": rate, "ours": rate} for row in bench.ROWS}
     # the paper's arm: Table 4 4 x 2M, Fig. 6 4 x 2M, Table 2 3 x 2M, §7.3 5 x 1.5M = 29.5M;
-    # ours: Table 4 2 x 4M (biped) + 2 x 2M (quadruped) + two base stages of 2M, Fig. 6 8M,
-    # Table 2 6M, §7.3 7.5M = 37.5M; each on three seeds
+    # ours: Table 4 2 x 8M (biped) + 2 x 2M (quadruped) + two base stages of 2M, Fig. 6 8M,
+    # Table 2 6M, §7.3 7.5M = 45.5M; each on three seeds
     assert bench.total_hours(costs) == pytest.approx(
-        {"paper": 3 * 29_500 / 3600, "ours": 3 * 37_500 / 3600}
+        {"paper": 3 * 29_500 / 3600, "ours": 3 * 45_500 / 3600}
     )
     costs["l21_table2"]["paper"] = {"seconds_per_1k_steps": 2.0}  # one arm of one row slower
     budget = bench._curricula_budget([[], []], costs)
@@ -214,7 +214,8 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
     def kept(seed: int, width: float | None) -> dict:
         grid = {"coefficient_of_variation": 0.5}
         report = {"fall_percent": 50.0, "task_achievement": 40.0, "worst_decile_return": 20.0,
-                  "grid_uniformity": grid, "range_width": width}  # fmt: skip
+                  "grid_uniformity": grid, "mean_length_seconds": 20.0,
+                  "mean_forward_speed": 1.0, "range_width": width}  # fmt: skip
         return {"seed": seed, "report": report}
 
     cell = bench._cell("wl19_table4", [kept(0, 0.6), kept(1, 1.0)])
@@ -222,8 +223,25 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
     assert "trained on" not in bench._cell("wl19_table4", [kept(0, 1.0), kept(1, 1.0)])
     assert "trained on" not in bench._cell("wl19_table4", [kept(0, None)])  # kept before it
 
-    # kept before the width was, its run directory gone: the config says it where it can
+    # a budget raised later: its runs supersede those kept at the old one, which stay apart
     bench.OUT.mkdir()
+    for seed, steps, width in ((0, 4_000_000, 0.5), (1, 4_000_000, 0.6), (0, 8_000_000, 0.9)):
+        path = bench.result_path("wl19_table4", "ours", "biped_lower_rn", seed, steps)
+        path.write_text(json.dumps(kept(seed, width) | {"env_steps": steps + 100}))
+    assert [r["seed"] for r in bench._results("wl19_table4", "ours", "biped_lower_rn")] == [0]
+    summary = bench._kept_summary("wl19_table4", "ours", "biped_lower_rn")
+    assert summary["per_seed"]["range_width"] == [0.9]
+    assert summary["earlier"]["4000k"]["per_seed"]["range_width"] == [0.5, 0.6]
+    assert bench._short_of_budget("wl19_table4", "ours", ["biped_lower_rn"]) == ""
+    (bench.OUT / "wl19_table4_ours_biped_lower_rn_s0_8000k.json").unlink()  # 4M kept only
+    assert bench._short_of_budget("wl19_table4", "ours", ["biped_lower_rn"]) == "at 4M of 8M"
+    path = bench.result_path("wl19_table4", "ours", "quadruped_rn", 0, 2_000_000)
+    path.write_text(json.dumps(kept(0, 1.0)))
+    assert "earlier" not in bench._kept_summary("wl19_table4", "ours", "quadruped_rn")
+    for path in bench.OUT.iterdir():
+        path.unlink()
+
+    # kept before the width was, its run directory gone: the config says it where it can
     for variant in ("quadruped_rn", "biped_lower_rn"):
         old = {"row": "wl19_table4", "arm": "ours", "variant": variant, "seed": 0,
                "env_steps": 2000, "report": {"sampling": {"effective_share": 0.1}}}  # fmt: skip
@@ -333,11 +351,17 @@ def test_all_leaves_what_is_kept_and_costs_what_is_left(benchmark_module, tmp_pa
     rate = {"seconds_per_1k_steps": 1.8}  # 1 h per 2M env steps
     costs = {row: {"paper": rate, "ours": rate} for row in bench.ROWS}
     (bench.OUT / "cost.json").write_text(json.dumps(costs))
-    # the biped's family stage (4M) and its base stage (2M), which nothing has trained yet
+    # the biped's family stage (8M) and its base stage (2M), which nothing has trained yet
     assert bench.pending(["ours"]) == [
-        ("wl19_table4 ours biped_lower_no_rn seed 1", pytest.approx(3.0)),
+        ("wl19_table4 ours biped_lower_no_rn seed 1", pytest.approx(5.0)),
         ("§7.3 ours mastering seed 2", pytest.approx(0.75)),
     ]
+    # stopped at 3M of the family stage, its base stage done: what is left of it only
+    run_dir = bench.RUNS / "wl19_table4" / "ours" / "biped_lower_no_rn_s1"
+    checkpoint.save(run_dir, {"progress": {"env_steps": 3_000_000}}, 1)
+    base = bench.base_dir("wl19_table4", "ours", "configs/biped_base.yaml", 1)
+    checkpoint.save(base, {"progress": {"env_steps": 2_000_000}}, 1)
+    assert bench.pending(["ours"])[0][1] == pytest.approx(2.5)
     left = bench.pending(["paper"])  # nothing of the paper's arm is kept: every run, no bases
     runs = sum(len(spec["variants"]) for spec in bench.ROWS.values()) + len(bench.CURRICULA)
     assert len(left) == 3 * runs
