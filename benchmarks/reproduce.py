@@ -524,10 +524,15 @@ def _kept_summary(row: str, arm: str, variant: str) -> dict:
     return latest | ({"earlier": earlier} if earlier else {})
 
 
-def _seeded(row: str, arm: str, variant: str) -> list[dict]:
-    """A variant's runs once it has run on every seed a claim is judged on (none before)."""
-    found = _results(row, arm, variant)
-    return found if len(found) >= CLAIM_SEEDS else []
+def _seeded(row: str, arm: str, variants: list[str]) -> list[list[dict]]:
+    """The runs of the variants a claim compares, once each has run on every seed the claim is
+    judged on, all at one budget (a budget raised for some: not until they all reach it);
+    empty lists before."""
+    found = [_by_budget(row, arm, v) for v in variants]
+    latest = {max(b) for b in found if b}
+    if len(latest) != 1 or any(len(b.get(max(latest), [])) < CLAIM_SEEDS for b in found):
+        return [[] for _ in variants]
+    return [b[max(latest)] for b in found]
 
 
 def _mean(results: list[dict], key) -> float:
@@ -548,7 +553,7 @@ def _on_seeds(groups: list[list[dict]], holds) -> str:
 
 def _claim_rn(arm: str, body: str) -> tuple[str, str]:
     """[WL19] Table 4: reward normalization raises task achievement and lowers falls."""
-    on, off = (_seeded("wl19_table4", arm, f"{body}_{v}") for v in ("rn", "no_rn"))
+    on, off = _seeded("wl19_table4", arm, [f"{body}_rn", f"{body}_no_rn"])
     if not on or not off:
         return "not run yet", ""
     task = [_mean(x, lambda r: r["task_achievement"]) for x in (on, off)]
@@ -565,7 +570,8 @@ def _claim_rn(arm: str, body: str) -> tuple[str, str]:
 def _claim_k(arm: str) -> tuple[str, str]:
     """[WL19] Fig. 6: the higher k, the more uniform the per-shape returns (a lower CV at
     k = 10 than at k = 0, Fig. 6a/b)."""
-    found = {k: _seeded("wl19_fig6", arm, f"k{k}") for k in (0, 5, 10, 20)}
+    found = dict(zip((0, 5, 10, 20), _seeded("wl19_fig6", arm, ["k0", "k5", "k10", "k20"]),
+                     strict=True))  # fmt: skip
     if not all(found.values()):
         return "not run yet", ""
     cv = [_mean(x, _cv) for x in found.values()]
@@ -585,7 +591,8 @@ def _cv(report: dict) -> float:
 def _claim_ablation(arm: str) -> tuple[str, str]:
     """[L21] Table 2 (§7.2): A3 explores wider task ranges than A2 and A1, as the share of the
     task space explored that §7.2 measures (ER), with the range of each dimension beside it."""
-    found = {v: _seeded("l21_table2", arm, v) for v in ("A1", "A2", "A3")}
+    variants = ["A1", "A2", "A3"]
+    found = dict(zip(variants, _seeded("l21_table2", arm, variants), strict=True))
     if not all(found.values()):
         return "not run yet", ""
     er = [_mean(x, lambda r: r["explored_ratio"]) for x in found.values()]

@@ -235,6 +235,16 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
     assert bench._short_of_budget("wl19_table4", "ours", ["biped_lower_rn"]) == ""
     (bench.OUT / "wl19_table4_ours_biped_lower_rn_s0_8000k.json").unlink()  # 4M kept only
     assert bench._short_of_budget("wl19_table4", "ours", ["biped_lower_rn"]) == "at 4M of 8M"
+    # a claim compares variants at one budget, each on three seeds
+    for variant in ("biped_lower_rn", "biped_lower_no_rn"):
+        for seed in (0, 1, 2):
+            path = bench.result_path("wl19_table4", "ours", variant, seed, 4_000_000)
+            path.write_text(json.dumps(kept(seed, 0.5)))
+    verdict, text = bench._claim_rn("ours", "biped_lower")
+    assert verdict == "disagrees" and text.endswith("; at 4M of 8M")  # equal: RN raises nothing
+    path = bench.result_path("wl19_table4", "ours", "biped_lower_rn", 0, 8_000_000)
+    path.write_text(json.dumps(kept(0, 1.0)))
+    assert bench._claim_rn("ours", "biped_lower") == ("not run yet", "")  # 8M against 4M: no
     path = bench.result_path("wl19_table4", "ours", "quadruped_rn", 0, 2_000_000)
     path.write_text(json.dumps(kept(0, 1.0)))
     assert "earlier" not in bench._kept_summary("wl19_table4", "ours", "quadruped_rn")
