@@ -515,10 +515,10 @@ def _short_of_budget(row: str, arm: str, variants: list[str]) -> str:
     return ""
 
 
-def _kept_summary(row: str, arm: str, variant: str) -> dict:
-    """`_summary` of a variant's runs at its largest budget, with those kept at smaller ones
-    under `earlier` (by budget: "4000k")."""
-    budgets = _by_budget(row, arm, variant)
+def _kept_summary(row: str, budgets: dict[int, list[dict]]) -> dict:
+    """`_summary` of a variant's runs at its largest budget (`_by_budget`), with those kept at
+    smaller ones under `earlier` (by budget: "4000k")."""
+    budgets = dict(budgets)
     latest = _summary(row, budgets.pop(max(budgets)))
     earlier = {f"{b // 1000}k": _summary(row, r) for b, r in budgets.items()}
     return latest | ({"earlier": earlier} if earlier else {})
@@ -732,12 +732,13 @@ def table() -> str:
         for variant in spec["variants"]:
             cells = {}
             for arm in ("paper", "ours"):
-                found = _results(row, arm, variant)
+                budgets = _by_budget(row, arm, variant)
+                found = budgets[max(budgets)] if budgets else []
                 short = _short_of_budget(row, arm, [variant]) if found else ""
                 cells[arm] = _cell(row, found) + (f", {short}" if short else "")
                 if found:
                     summary.setdefault(row, {}).setdefault(arm, {})[variant] = _kept_summary(
-                        row, arm, variant
+                        row, budgets
                     )
             rows.append([spec["paper"], variant, spec["paper_numbers"][variant],
                          cells["paper"], cells["ours"], _budget(row, variant, costs)])  # fmt: skip

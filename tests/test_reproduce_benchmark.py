@@ -229,7 +229,9 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
         path = bench.result_path("wl19_table4", "ours", "biped_lower_rn", seed, steps)
         path.write_text(json.dumps(kept(seed, width) | {"env_steps": steps + 100}))
     assert [r["seed"] for r in bench._results("wl19_table4", "ours", "biped_lower_rn")] == [0]
-    summary = bench._kept_summary("wl19_table4", "ours", "biped_lower_rn")
+    summary = bench._kept_summary(
+        "wl19_table4", bench._by_budget("wl19_table4", "ours", "biped_lower_rn")
+    )
     assert summary["per_seed"]["range_width"] == [0.9]
     assert summary["earlier"]["4000k"]["per_seed"]["range_width"] == [0.5, 0.6]
     assert bench._short_of_budget("wl19_table4", "ours", ["biped_lower_rn"]) == ""
@@ -247,7 +249,9 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
     assert bench._claim_rn("ours", "biped_lower") == ("not run yet", "")  # 8M against 4M: no
     path = bench.result_path("wl19_table4", "ours", "quadruped_rn", 0, 2_000_000)
     path.write_text(json.dumps(kept(0, 1.0)))
-    assert "earlier" not in bench._kept_summary("wl19_table4", "ours", "quadruped_rn")
+    assert "earlier" not in bench._kept_summary(
+        "wl19_table4", bench._by_budget("wl19_table4", "ours", "quadruped_rn")
+    )
     for path in bench.OUT.iterdir():
         path.unlink()
 
