@@ -789,9 +789,15 @@ def _jobs(row: str, arm: str, variants: list[str] | None, seeds: list[int],
 def run_row(row: str, arm: str, variants: list[str] | None, seeds: list[int],
             steps: int | None = None, jobs: int = 1) -> None:  # fmt: skip
     """Every run of a row in an arm that is not kept yet, `jobs` at once."""
-    todo = _jobs(row, arm, variants, seeds, steps)
-    print(f"{row} {arm}: {len(todo)} runs to train" + "".join(
-        f"\n  {variant} seed {seed}" for _, _, variant, seed, _ in todo))  # fmt: skip
+    _train(_jobs(row, arm, variants, seeds, steps), jobs)
+
+
+def _train(todo: list[tuple], jobs: int) -> None:
+    """`run_one` on each job, `jobs` at once (one torch thread each when more than one)."""
+    listed = "".join(
+        f"\n  {row} {arm} {variant} seed {seed}" for row, arm, variant, seed, _ in todo
+    )
+    print(f"{len(todo)} runs to train{listed}")
     if jobs <= 1:
         for job in todo:
             run_one(*job)
@@ -872,8 +878,8 @@ def run_all(arms: list[str], jobs: int) -> None:
     import sys
 
     for arm in arms:
-        for row in ROWS:
-            run_row(row, arm, None, SEEDS, None, jobs)
+        # one pool over the rows: an odd row's last run shares the cores with the next row's
+        _train([job for row in ROWS for job in _jobs(row, arm, None, SEEDS)], jobs)
         script = str(ROOT / "benchmarks" / "curriculum.py")
         subprocess.run([sys.executable, script, *_curricula_command(arm, jobs)], check=True)
     print(table())
