@@ -877,10 +877,10 @@ def run_all(arms: list[str], jobs: int) -> None:
     import subprocess
     import sys
 
+    # one pool over the rows and arms: a row's odd last run shares the cores with the next's
+    _train([job for arm in arms for row in ROWS for job in _jobs(row, arm, None, SEEDS)], jobs)
+    script = str(ROOT / "benchmarks" / "curriculum.py")
     for arm in arms:
-        # one pool over the rows: an odd row's last run shares the cores with the next row's
-        _train([job for row in ROWS for job in _jobs(row, arm, None, SEEDS)], jobs)
-        script = str(ROOT / "benchmarks" / "curriculum.py")
         subprocess.run([sys.executable, script, *_curricula_command(arm, jobs)], check=True)
     print(table())
 
