@@ -24,6 +24,7 @@ benchmarks/results/reproduce/.
     python benchmarks/reproduce.py table        # docs/reproduce.md from the JSON and the recipes
     python benchmarks/reproduce.py cost         # what a run costs in each arm (cost.json)
     python benchmarks/reproduce.py backfill     # measures added since into kept runs' JSON
+    python benchmarks/reproduce.py rn-falls     # where Table 4's runs fall, by RN's scale
     python benchmarks/reproduce.py list
 """
 
@@ -285,6 +286,62 @@ def scales(bodies: int = EVAL["bodies"]) -> dict:
                                            strict=True)},
             }  # fmt: skip
     return out
+
+
+def rn_falls(arm: str) -> dict:
+    """Where each [WL19] Table 4 run of an arm falls: its held-out bodies evaluated again from
+    its run directory's checkpoint (the state its report was measured in: the same bodies and
+    episode seeds, so the same falls), by each body's RN velocity scale ([WL19] Table 1, as
+    `scales`): the share that falls in each third of the bodies, the lowest scale (shortest or
+    most uneven legs) first, with the mean forward speed there. Written to rn_falls.json by
+    arm; the thirds are a seed's, so RN on and off of a seed split the same bodies."""
+    from paramimic.envs import env_for
+    from paramimic.envs.reward_normalization import reward_scales
+    from paramimic.evaluation import deterministic, run_episodes
+    from paramimic.training import checkpoint
+
+    found: dict = {}
+    for variant in ROWS["wl19_table4"]["variants"]:
+        for kept in _results("wl19_table4", arm, variant):
+            seed = kept["seed"]
+            run_dir = RUNS / "wl19_table4" / arm / f"{variant}_s{seed}"
+            if not checkpoint.checkpoint_dir(run_dir).is_dir():
+                print(f"{run_dir}: no checkpoint, skipped")
+                continue
+            state, cfg, policy = checkpoint.load_policy(run_dir)
+            if state["progress"]["env_steps"] != kept["env_steps"]:
+                print(f"{run_dir}: trained on since it was evaluated, skipped")
+                continue
+            space = cfg.task_space()
+            tasks = space.sample(np.random.default_rng(EVAL_SEED + seed), EVAL["bodies"])
+            env_cfg = cfg.env.for_evaluation(EVAL["seconds"])
+            make_env = functools.partial(env_for, cfg, env_cfg)
+            episodes = run_episodes(deterministic(policy), make_env, tasks, 8, EVAL_SEED + seed)
+            env = env_for(cfg)
+            base = env.body_for(space.base(env.definition.param_names()))
+            velocity = np.array([
+                reward_scales(b.leg_lengths, base.leg_lengths, b.mass, base.mass).velocity
+                for b in map(env.body_for, tasks)
+            ])  # fmt: skip
+            env.close()
+            fell = np.array([e.fell for e in episodes], dtype=float)
+            speed = np.array([e.distance / e.seconds for e in episodes])
+            third = np.digitize(velocity, np.quantile(velocity, [1 / 3, 2 / 3]))
+            found.setdefault(variant, {"seeds": {}})["seeds"][str(seed)] = {
+                "falls": 100.0 * float(fell.mean()),
+                "kept_falls": kept["report"]["fall_percent"],
+                "velocity_scale_edges": np.quantile(velocity, [0, 1 / 3, 2 / 3, 1]).tolist(),
+                "falls_by_third": [100.0 * float(fell[third == i].mean()) for i in range(3)],
+                "speed_by_third": [float(speed[third == i].mean()) for i in range(3)],
+            }
+    for v in found.values():
+        v["mean"] = {k: np.mean([r[k] for r in v["seeds"].values()], axis=0).tolist()
+                     for k in ("falls", "falls_by_third", "speed_by_third")}  # fmt: skip
+    path = OUT / "rn_falls.json"
+    kept_all = json.loads(path.read_text()) if path.exists() else {}
+    path.write_text(json.dumps(kept_all | {arm: found}, indent=1))
+    print(f"wrote {path}")
+    return found
 
 
 def backfill() -> list[Path]:
@@ -908,6 +965,9 @@ def main() -> None:
     a.add_argument("--arms", default="ours,paper")
     a.add_argument("--jobs", type=int, default=2, help="runs at once (2 on a 2-core machine)")
     a.add_argument("--dry-run", action="store_true", help="list what is left, with its hours")
+    f = sub.add_parser("rn-falls", help="where each [WL19] Table 4 run falls, by RN's velocity "
+                       "scale (its bodies evaluated again from its checkpoint)")  # fmt: skip
+    f.add_argument("--arm", choices=("paper", "ours"), default="ours")
     sub.add_parser("table")
     sub.add_parser("backfill", help="measures added since into kept runs, from their checkpoints")
     sub.add_parser("list")
@@ -922,6 +982,9 @@ def main() -> None:
         return
     if args.cmd == "backfill":
         backfill()
+        return
+    if args.cmd == "rn-falls":
+        rn_falls(args.arm)
         return
     if args.cmd == "table":
         print(table())
