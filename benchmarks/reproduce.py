@@ -293,8 +293,9 @@ def rn_falls(arm: str) -> dict:
     its run directory's checkpoint (the state its report was measured in: the same bodies and
     episode seeds, so the same falls), by each body's RN velocity scale ([WL19] Table 1, as
     `scales`): the share that falls in each third of the bodies, the lowest scale (shortest or
-    most uneven legs) first, with the mean forward speed there. Written to rn_falls.json by
-    arm; the thirds are a seed's, so RN on and off of a seed split the same bodies."""
+    most uneven legs) first, with the mean forward speed there and the mean target speed (RN's
+    per body, or the base body's without RN). Written to rn_falls.json by arm; the thirds are a
+    seed's, so RN on and off of a seed split the same bodies."""
     from paramimic.envs import env_for
     from paramimic.envs.reward_normalization import reward_scales
     from paramimic.evaluation import deterministic, run_episodes
@@ -326,6 +327,7 @@ def rn_falls(arm: str) -> dict:
             env.close()
             fell = np.array([e.fell for e in episodes], dtype=float)
             speed = np.array([e.distance / e.seconds for e in episodes])
+            target = np.array([e.target_speed for e in episodes])  # RN's, or the base's
             third = np.digitize(velocity, np.quantile(velocity, [1 / 3, 2 / 3]))
             found.setdefault(variant, {"seeds": {}})["seeds"][str(seed)] = {
                 "falls": 100.0 * float(fell.mean()),
@@ -333,10 +335,12 @@ def rn_falls(arm: str) -> dict:
                 "velocity_scale_edges": np.quantile(velocity, [0, 1 / 3, 2 / 3, 1]).tolist(),
                 "falls_by_third": [100.0 * float(fell[third == i].mean()) for i in range(3)],
                 "speed_by_third": [float(speed[third == i].mean()) for i in range(3)],
+                "target_by_third": [float(target[third == i].mean()) for i in range(3)],
             }
+    means = ("falls", "falls_by_third", "speed_by_third", "target_by_third")
     for v in found.values():
         v["mean"] = {k: np.mean([r[k] for r in v["seeds"].values()], axis=0).tolist()
-                     for k in ("falls", "falls_by_third", "speed_by_third")}  # fmt: skip
+                     for k in means}  # fmt: skip
     path = OUT / "rn_falls.json"
     kept_all = json.loads(path.read_text()) if path.exists() else {}
     path.write_text(json.dumps(kept_all | {arm: found}, indent=1))
