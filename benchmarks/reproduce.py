@@ -289,63 +289,76 @@ def scales(bodies: int = EVAL["bodies"]) -> dict:
 
 
 def rn_falls(arm: str) -> dict:
-    """Where each [WL19] Table 4 run of an arm falls: its held-out bodies evaluated again from
-    its run directory's checkpoint (the state its report was measured in: the same bodies and
-    episode seeds, so the same falls), by each body's RN velocity scale ([WL19] Table 1, as
-    `scales`): the share that falls in each third of the bodies, the lowest scale (shortest or
-    most uneven legs) first, with the mean forward speed there and the mean target speed (RN's
-    per body, or the base body's without RN). Written to rn_falls.json by arm; the thirds are a
-    seed's, so RN on and off of a seed split the same bodies."""
+    """Where each [WL19] Table 4 run of an arm falls (`_falls_by_scale`), into rn_falls.json by
+    arm; a run measured there at the env steps it was kept at is not measured again. The thirds
+    are a seed's, so RN on and off of a seed split the same bodies."""
+    path = OUT / "rn_falls.json"
+    kept_all = json.loads(path.read_text()) if path.exists() else {}
+    before = kept_all.get(arm, {})
+    found: dict = {}
+    for variant in ROWS["wl19_table4"]["variants"]:
+        for kept in _results("wl19_table4", arm, variant):
+            seed = str(kept["seed"])
+            old = before.get(variant, {}).get("seeds", {}).get(seed)
+            if old is None or old.get("env_steps") != kept["env_steps"]:
+                old = _falls_by_scale(arm, variant, kept)
+            if old is not None:
+                found.setdefault(variant, {"seeds": {}})["seeds"][seed] = old
+    means = ("falls", "falls_by_third", "speed_by_third", "target_by_third")
+    for v in found.values():
+        v["mean"] = {k: np.mean([r[k] for r in v["seeds"].values()], axis=0).tolist()
+                     for k in means}  # fmt: skip
+    OUT.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(kept_all | {arm: found}, indent=1))
+    print(f"wrote {path}")
+    return found
+
+
+def _falls_by_scale(arm: str, variant: str, kept: dict) -> dict | None:
+    """A kept [WL19] Table 4 run's held-out bodies evaluated again from its run directory's
+    checkpoint (the state its report was measured in: the same bodies and episode seeds, so the
+    same falls), by each body's RN velocity scale ([WL19] Table 1, as `scales`): the share that
+    falls in each third of the bodies, the lowest scale (shortest or most uneven legs) first,
+    with the mean forward speed there and the mean target speed (RN's per body, or the base
+    body's without RN). None without the checkpoint it was evaluated in."""
     from paramimic.envs import env_for
     from paramimic.envs.reward_normalization import reward_scales
     from paramimic.evaluation import deterministic, run_episodes
     from paramimic.training import checkpoint
 
-    found: dict = {}
-    for variant in ROWS["wl19_table4"]["variants"]:
-        for kept in _results("wl19_table4", arm, variant):
-            seed = kept["seed"]
-            run_dir = RUNS / "wl19_table4" / arm / f"{variant}_s{seed}"
-            if not checkpoint.checkpoint_dir(run_dir).is_dir():
-                print(f"{run_dir}: no checkpoint, skipped")
-                continue
-            state, cfg, policy = checkpoint.load_policy(run_dir)
-            if state["progress"]["env_steps"] != kept["env_steps"]:
-                print(f"{run_dir}: trained on since it was evaluated, skipped")
-                continue
-            space = cfg.task_space()
-            tasks = space.sample(np.random.default_rng(EVAL_SEED + seed), EVAL["bodies"])
-            env_cfg = cfg.env.for_evaluation(EVAL["seconds"])
-            make_env = functools.partial(env_for, cfg, env_cfg)
-            episodes = run_episodes(deterministic(policy), make_env, tasks, 8, EVAL_SEED + seed)
-            env = env_for(cfg)
-            base = env.body_for(space.base(env.definition.param_names()))
-            velocity = np.array([
-                reward_scales(b.leg_lengths, base.leg_lengths, b.mass, base.mass).velocity
-                for b in map(env.body_for, tasks)
-            ])  # fmt: skip
-            env.close()
-            fell = np.array([e.fell for e in episodes], dtype=float)
-            speed = np.array([e.distance / e.seconds for e in episodes])
-            target = np.array([e.target_speed for e in episodes])  # RN's, or the base's
-            third = np.digitize(velocity, np.quantile(velocity, [1 / 3, 2 / 3]))
-            found.setdefault(variant, {"seeds": {}})["seeds"][str(seed)] = {
-                "falls": 100.0 * float(fell.mean()),
-                "kept_falls": kept["report"]["fall_percent"],
-                "velocity_scale_edges": np.quantile(velocity, [0, 1 / 3, 2 / 3, 1]).tolist(),
-                "falls_by_third": [100.0 * float(fell[third == i].mean()) for i in range(3)],
-                "speed_by_third": [float(speed[third == i].mean()) for i in range(3)],
-                "target_by_third": [float(target[third == i].mean()) for i in range(3)],
-            }
-    means = ("falls", "falls_by_third", "speed_by_third", "target_by_third")
-    for v in found.values():
-        v["mean"] = {k: np.mean([r[k] for r in v["seeds"].values()], axis=0).tolist()
-                     for k in means}  # fmt: skip
-    path = OUT / "rn_falls.json"
-    kept_all = json.loads(path.read_text()) if path.exists() else {}
-    path.write_text(json.dumps(kept_all | {arm: found}, indent=1))
-    print(f"wrote {path}")
-    return found
+    seed = kept["seed"]
+    run_dir = RUNS / "wl19_table4" / arm / f"{variant}_s{seed}"
+    if not checkpoint.checkpoint_dir(run_dir).is_dir():
+        print(f"{run_dir}: no checkpoint, skipped")
+        return None
+    state, cfg, policy = checkpoint.load_policy(run_dir)
+    if state["progress"]["env_steps"] != kept["env_steps"]:
+        print(f"{run_dir}: trained on since it was evaluated, skipped")
+        return None
+    space = cfg.task_space()
+    tasks = space.sample(np.random.default_rng(EVAL_SEED + seed), EVAL["bodies"])
+    make_env = functools.partial(env_for, cfg, cfg.env.for_evaluation(EVAL["seconds"]))
+    episodes = run_episodes(deterministic(policy), make_env, tasks, 8, EVAL_SEED + seed)
+    env = env_for(cfg)
+    base = env.body_for(space.base(env.definition.param_names()))
+    velocity = np.array([
+        reward_scales(b.leg_lengths, base.leg_lengths, b.mass, base.mass).velocity
+        for b in map(env.body_for, tasks)
+    ])  # fmt: skip
+    env.close()
+    fell = np.array([e.fell for e in episodes], dtype=float)
+    speed = np.array([e.distance / e.seconds for e in episodes])
+    target = np.array([e.target_speed for e in episodes])  # RN's, or the base's
+    third = np.digitize(velocity, np.quantile(velocity, [1 / 3, 2 / 3]))
+    return {
+        "env_steps": kept["env_steps"],
+        "falls": 100.0 * float(fell.mean()),
+        "kept_falls": kept["report"]["fall_percent"],
+        "velocity_scale_edges": np.quantile(velocity, [0, 1 / 3, 2 / 3, 1]).tolist(),
+        "falls_by_third": [100.0 * float(fell[third == i].mean()) for i in range(3)],
+        "speed_by_third": [float(speed[third == i].mean()) for i in range(3)],
+        "target_by_third": [float(target[third == i].mean()) for i in range(3)],
+    }
 
 
 def backfill() -> list[Path]:
@@ -933,8 +946,8 @@ def _trained(run_dir: Path, steps: int) -> bool:
 
 
 def run_all(arms: list[str], jobs: int) -> None:
-    """Every row in each arm on the claims' seeds, then §7.3's curricula, then the table: what
-    is kept is skipped, what was stopped resumes."""
+    """Every row in each arm on the claims' seeds, then §7.3's curricula and where Table 4's
+    runs fall (`rn_falls`), then the table: what is kept is skipped, what was stopped resumes."""
     import subprocess
     import sys
 
@@ -943,6 +956,7 @@ def run_all(arms: list[str], jobs: int) -> None:
     script = str(ROOT / "benchmarks" / "curriculum.py")
     for arm in arms:
         subprocess.run([sys.executable, script, *_curricula_command(arm, jobs)], check=True)
+        rn_falls(arm)
     print(table())
 
 

@@ -52,6 +52,8 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     assert where["falls"] == where["kept_falls"] == report["fall_percent"]
     assert len(where["falls_by_third"]) == 3 and len(where["velocity_scale_edges"]) == 4
     assert json.loads((tmp_path / "results" / "rn_falls.json").read_text())["paper"]
+    monkeypatch.setattr(bench, "_falls_by_scale", None)  # measured at these steps: kept
+    assert bench.rn_falls("paper")["quadruped_no_rn"]["seeds"]["0"] == where
 
     # [L21] Table 2's A1 in our arm: the explored range of the elites
     a1 = bench.run_one("l21_table2", "ours", "A1", 0, 4096, threads=1)
