@@ -626,16 +626,22 @@ def _on_seeds(groups: list[list[dict]], holds) -> str:
 
 
 def _claim_rn(arm: str, body: str) -> tuple[str, str]:
-    """[WL19] Table 4: reward normalization raises task achievement and lowers falls."""
+    """[WL19] Table 4: reward normalization raises task achievement and lowers falls ("cannot
+    say" where every body of both variants falls: the claim is about families that walk)."""
     on, off = _seeded("wl19_table4", arm, [f"{body}_rn", f"{body}_no_rn"])
     if not on or not off:
         return "not run yet", ""
     task = [_mean(x, lambda r: r["task_achievement"]) for x in (on, off)]
     falls = [_mean(x, lambda r: r["fall_percent"]) for x in (on, off)]
+    short = _short_of_budget("wl19_table4", arm, [f"{body}_rn", f"{body}_no_rn"])
+    if min(falls) >= 100.0:  # no body of either variant stays up: a claim about walkers
+        up = [_mean(x, lambda r: r["mean_length_seconds"]) for x in (on, off)]
+        return "cannot say", (f"every body falls with RN and without, after {up[0]:.1f} and "
+                              f"{up[1]:.1f} s on the mean; task {task[0]:.1f} vs {task[1]:.1f}"
+                              + (f"; {short}" if short else ""))  # fmt: skip
     verdict = "agrees" if task[0] > task[1] and falls[0] < falls[1] else "disagrees"
     seeds = _on_seeds([on, off], lambda a, b: a["task_achievement"] > b["task_achievement"]
                       and a["fall_percent"] < b["fall_percent"])  # fmt: skip
-    short = _short_of_budget("wl19_table4", arm, [f"{body}_rn", f"{body}_no_rn"])
     return verdict, (f"task {task[0]:.1f} vs {task[1]:.1f}, falls {falls[0]:.1f} % vs "
                      f"{falls[1]:.1f} % (RN on vs off); both {seeds}"
                      + (f"; {short}" if short else ""))  # fmt: skip

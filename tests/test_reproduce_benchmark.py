@@ -251,6 +251,19 @@ def test_a_family_run_keeps_the_share_of_its_ranges_it_trained_on(
             path.write_text(json.dumps(kept(seed, 0.5)))
     verdict, text = bench._claim_rn("ours", "biped_lower")
     assert verdict == "disagrees" and text.endswith("; at 4M of 8M")  # equal: RN raises nothing
+    fallen = kept(2, 0.5)
+    fallen["report"] |= {"fall_percent": 100.0, "mean_length_seconds": 1.0}
+    path = bench.result_path("wl19_table4", "ours", "biped_lower_rn", 2, 4_000_000)
+    path.write_text(json.dumps(fallen))
+    assert bench._claim_rn("ours", "biped_lower")[0] == "disagrees"  # RN off still walks
+    for variant in ("biped_lower_rn", "biped_lower_no_rn"):
+        for seed in (0, 1, 2):
+            path = bench.result_path("wl19_table4", "ours", variant, seed, 4_000_000)
+            path.write_text(json.dumps(fallen | {"seed": seed}))
+    verdict, text = bench._claim_rn("ours", "biped_lower")
+    assert verdict == "cannot say" and text.startswith(
+        "every body falls with RN and without, after 1.0 and 1.0 s on the mean; task 40.0 vs 40.0"
+    )
     path = bench.result_path("wl19_table4", "ours", "biped_lower_rn", 0, 8_000_000)
     path.write_text(json.dumps(kept(0, 1.0)))
     assert bench._claim_rn("ours", "biped_lower") == ("not run yet", "")  # 8M against 4M: no
