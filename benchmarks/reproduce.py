@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from humanoid import training_wall_clock  # benchmarks/humanoid.py
 from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -361,50 +362,66 @@ def _falls_by_scale(arm: str, variant: str, kept: dict) -> dict | None:
     }
 
 
+def trained_seconds(run_dir: Path, env_steps: int) -> float | None:
+    """Seconds a run trained to `env_steps`, over every session it was resumed in, the pauses
+    between them left out (from its metrics.jsonl); None without a logged iteration there."""
+    log = run_dir / "metrics.jsonl"
+    rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
+    upto = next((r["iteration"] for r in rows if r.get("env_steps") == env_steps), None)
+    return None if upto is None else training_wall_clock(run_dir, upto)
+
+
 def backfill() -> list[Path]:
     """Kept runs written before a measure was added get it from their run directory's
     checkpoint (the state they were evaluated in): a [WL19] run the sampler's concentration and
     the training range's width at its end, an [L21] run its elites' mean fitness. Without the
     checkpoint, a run whose config never grows its range gets its width from the config (the
-    whole range, from start to end)."""
+    whole range, from start to end). A run's `train_seconds` is its training log's
+    (`trained_seconds`, every session), where the log still reaches its env steps."""
+    done = []
+    for path in sorted(OUT.glob("*_s*_*k.json")):
+        out = json.loads(path.read_text())
+        run_dir = RUNS / out["row"] / out["arm"] / f"{out['variant']}_s{out['seed']}"
+        added = _missing_measures(out, run_dir)
+        seconds = trained_seconds(run_dir, out["env_steps"])
+        timed = {} if seconds in (None, out.get("train_seconds")) else {"train_seconds": seconds}
+        if not added and not timed:
+            continue
+        out["report"].update(added)
+        out.update(timed)
+        path.write_text(json.dumps(out, indent=2))
+        done.append(path)
+        print(path.name + ": " + ", ".join(f"{k} {v}" for k, v in (added | timed).items()))
+    return done
+
+
+def _missing_measures(out: dict, run_dir: Path) -> dict:
+    """The report keys a kept run lacks, from the checkpoint it was evaluated in (`backfill`)."""
     from paramimic.config import ExperimentConfig
     from paramimic.curriculum.adaptive import AdaptiveCurriculum
     from paramimic.training import checkpoint
 
-    done = []
-    for path in sorted(OUT.glob("*_s*_*k.json")):
-        out = json.loads(path.read_text())
-        family = ROWS[out["row"]]["measure"] == "family"
-        keys = ("sampling", "range_width") if family else ("elite_mean_fitness",)
-        run_dir = RUNS / out["row"] / out["arm"] / f"{out['variant']}_s{out['seed']}"
-        missing = [k for k in keys if k not in out["report"]]
-        if not missing:
-            continue
-        state = checkpoint.load(run_dir) if checkpoint.checkpoint_dir(run_dir).is_dir() else None
-        if state is not None and state["progress"]["env_steps"] != out["env_steps"]:
-            state = None  # trained on since: not the state that was evaluated
-        if state is None:
-            cfg, _ = _config(out["row"], out["arm"], out["variant"], out["seed"], run_dir, None,
-                             warm=False)  # fmt: skip
-            measures = {"range_width": 1.0} if family and cfg.curriculum.widen is None else {}
-        elif family:
-            curriculum = AdaptiveCurriculum.from_config(
-                ExperimentConfig.model_validate(state["config"])
-            )
-            curriculum.from_state(state["curriculum"])
-            measures = _family_state(curriculum)
-        else:
-            measures = {
-                "elite_mean_fitness": _mean_or_none(state["curriculum"]["elites"]["fitness"])
-            }
-        added = {k: measures[k] for k in missing if k in measures}
-        if not added:
-            continue
-        out["report"].update(added)
-        path.write_text(json.dumps(out, indent=2))
-        done.append(path)
-        print(f"{', '.join(added)} of {path.name}: " + ", ".join(map(str, added.values())))
-    return done
+    family = ROWS[out["row"]]["measure"] == "family"
+    keys = ("sampling", "range_width") if family else ("elite_mean_fitness",)
+    missing = [k for k in keys if k not in out["report"]]
+    if not missing:
+        return {}
+    state = checkpoint.load(run_dir) if checkpoint.checkpoint_dir(run_dir).is_dir() else None
+    if state is not None and state["progress"]["env_steps"] != out["env_steps"]:
+        state = None  # trained on since: not the state that was evaluated
+    if state is None:
+        cfg, _ = _config(out["row"], out["arm"], out["variant"], out["seed"], run_dir, None,
+                         warm=False)  # fmt: skip
+        measures = {"range_width": 1.0} if family and cfg.curriculum.widen is None else {}
+    elif family:
+        curriculum = AdaptiveCurriculum.from_config(
+            ExperimentConfig.model_validate(state["config"])
+        )
+        curriculum.from_state(state["curriculum"])
+        measures = _family_state(curriculum)
+    else:
+        measures = {"elite_mean_fitness": _mean_or_none(state["curriculum"]["elites"]["fitness"])}
+    return {k: measures[k] for k in missing if k in measures}
 
 
 def _family_state(curriculum) -> dict:
@@ -436,9 +453,8 @@ def run_one(
         run_base(row, arm, *base, seed, threads)
     cfg, overrides = _config(row, arm, variant, seed, run_dir, threads)
     torch.manual_seed(seed)
-    t0 = time.perf_counter()
     trainer = train_serial(cfg, steps, run_dir)
-    seconds = time.perf_counter() - t0
+    seconds = trained_seconds(run_dir, trainer.progress.env_steps)
     out = {"row": row, "arm": arm, "variant": variant, "seed": seed,
            "config": config, "overrides": overrides,
            "base": {"config": base[0], "env_steps": base[1]} if base else None,

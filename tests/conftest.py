@@ -1,5 +1,6 @@
 import importlib.util
 import os
+import sys
 import warnings
 from pathlib import Path
 
@@ -107,6 +108,9 @@ def holds(predicate, seconds: float, what: str = "a condition", every: float = 0
 def benchmark_module():
     """`benchmark_module(name)`: benchmarks/<name>.py imported as a module (the benchmarks are
     scripts, not a package), so a test runs a study's own code."""
+
+    if str(ROOT / "benchmarks") not in sys.path:  # a script imports its siblings by name
+        sys.path.insert(0, str(ROOT / "benchmarks"))
 
     def load(name: str):
         spec = importlib.util.spec_from_file_location(

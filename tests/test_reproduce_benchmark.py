@@ -39,13 +39,19 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     sampling = report["sampling"]
     assert 0.0 < sampling["effective_share"] <= 1.0 and 0.0 <= sampling["low_mass"] <= 1.0
     assert report["range_width"] == 1.0  # the paper's ranges from the start: no `widen`
-    # a run kept without them gets them back from its run directory's checkpoint
-    bare = json.loads(kept.read_text())
+    # its training time is its log's, the gap between its two iterations
+    trained = out["train_seconds"]
+    assert trained == bench.trained_seconds(run_dir, out["env_steps"]) and trained > 0
+    assert bench.trained_seconds(run_dir, out["env_steps"] + 1) is None  # never logged there
+    # a run kept without them gets them back from its run directory's checkpoint, and the time
+    # of a run kept by an older version after a resume (its last session's) from its whole log
+    bare = json.loads(kept.read_text()) | {"train_seconds": trained / 10}
     del bare["report"]["sampling"], bare["report"]["range_width"]
     kept.write_text(json.dumps(bare))
     assert bench.backfill() == [kept]
     assert json.loads(kept.read_text())["report"]["sampling"] == sampling
     assert json.loads(kept.read_text())["report"]["range_width"] == 1.0
+    assert json.loads(kept.read_text())["train_seconds"] == trained
     assert bench.backfill() == []  # nothing left to add
     # where it falls: its bodies again from its checkpoint, the same falls as its report
     where = bench.rn_falls("paper")["quadruped_no_rn"]["seeds"]["0"]
