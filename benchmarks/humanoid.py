@@ -89,17 +89,31 @@ def _table(header, rows) -> str:
     return tabulate(list(rows), headers=list(header), tablefmt="github", disable_numparse=True)
 
 
+def metrics_rows(run_dir: Path) -> list[dict]:
+    """A run's metrics.jsonl, a row per iteration; a torn last row (the run killed mid-write,
+    which the trainer cuts on its resume) left out."""
+    rows = []
+    for line in (run_dir / "metrics.jsonl").read_text().splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return rows
+
+
+def wall_clock(rows: list[dict]) -> float:
+    """Seconds of training over metrics rows: the gaps between iterations, those longer than
+    PAUSE (a stop between sessions) left out."""
+    gaps = np.diff(np.asarray([r["time"] for r in rows if "iteration" in r and "time" in r]))
+    return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
+
+
 def training_wall_clock(run: Path, up_to: int | None = None) -> float:
     """Seconds of training in a run's metrics.jsonl (of a run directory, or of the run a
     checkpoint file belongs to) up to iteration `up_to`, pauses between sessions left out."""
     run_dir = run.parent.parent if run.is_file() else run  # RUN/checkpoints/ckpt_N.pt
-    times = []
-    for line in (run_dir / "metrics.jsonl").read_text().splitlines():
-        row = json.loads(line)
-        if "iteration" in row and "time" in row and (up_to is None or row["iteration"] <= up_to):
-            times.append(row["time"])
-    gaps = np.diff(np.asarray(times))
-    return float(gaps[gaps < PAUSE].sum()) if len(gaps) else 0.0
+    rows = metrics_rows(run_dir)
+    return wall_clock([r for r in rows if up_to is None or r.get("iteration", 0) <= up_to])
 
 
 def judged(r: dict, budget: int | None) -> bool | None:
@@ -309,8 +323,7 @@ def curve(runs: list[Path], out: Path) -> Path:
 
     fig, (ax_len, ax_rew) = plt.subplots(1, 2, figsize=(10, 3.5))
     for run in runs:
-        rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-        rows = [r for r in rows if "iteration" in r and "mean_length" in r]
+        rows = [r for r in metrics_rows(run) if "iteration" in r and "mean_length" in r]
         config = yaml_config(run)
         dt = 1.0 / config["env"]["control_hz"]
         steps = np.array([r["env_steps"] for r in rows]) / 1e6

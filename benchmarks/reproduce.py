@@ -38,7 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from humanoid import training_wall_clock  # benchmarks/humanoid.py
+from humanoid import metrics_rows, wall_clock  # benchmarks/humanoid.py
 from tabulate import tabulate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -365,10 +365,9 @@ def _falls_by_scale(arm: str, variant: str, kept: dict) -> dict | None:
 def trained_seconds(run_dir: Path, env_steps: int) -> float | None:
     """Seconds a run trained to `env_steps`, over every session it was resumed in, the pauses
     between them left out (from its metrics.jsonl); None without a logged iteration there."""
-    log = run_dir / "metrics.jsonl"
-    rows = [json.loads(line) for line in log.read_text().splitlines()] if log.exists() else []
+    rows = metrics_rows(run_dir) if (run_dir / "metrics.jsonl").exists() else []
     upto = next((r["iteration"] for r in rows if r.get("env_steps") == env_steps), None)
-    return None if upto is None else training_wall_clock(run_dir, upto)
+    return None if upto is None else wall_clock([r for r in rows if r.get("iteration", 0) <= upto])
 
 
 def backfill() -> list[Path]:

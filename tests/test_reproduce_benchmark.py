@@ -43,6 +43,9 @@ def test_a_row_at_the_papers_settings_is_kept_and_tabled(benchmark_module, tmp_p
     trained = out["train_seconds"]
     assert trained == bench.trained_seconds(run_dir, out["env_steps"]) and trained > 0
     assert bench.trained_seconds(run_dir, out["env_steps"] + 1) is None  # never logged there
+    with (run_dir / "metrics.jsonl").open("a") as log:  # a row torn by a kill, cut on resume
+        log.write('{"iteration": 3, "env_st')
+    assert bench.trained_seconds(run_dir, out["env_steps"]) == trained
     # a run kept without them gets them back from its run directory's checkpoint, and the time
     # of a run kept by an older version after a resume (its last session's) from its whole log
     bare = json.loads(kept.read_text()) | {"train_seconds": trained / 10}
